@@ -1,0 +1,1 @@
+"""Board constraints: the pin table, the .sdc and the .qsf template."""

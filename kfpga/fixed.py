@@ -1,0 +1,265 @@
+"""The fixed-point format type and the integer quantisation rules shared by model and RTL.
+
+A value in format ``Q(i, f)`` is a signed two's-complement integer ``raw`` of ``i + f`` bits
+(``i`` integer bits including the sign, ``f`` fraction bits) that stands for ``raw * 2**-f``.
+
+Every quantisation point of the datapath is a :class:`QFormat`: the format plus the rounding
+rule used when fraction bits are dropped and the overflow rule used when the result does not
+fit. :func:`requantize` applies both to exact integers; ``hw/arith.py`` builds the same
+operation in Amaranth, so the model and the RTL produce identical integers.
+
+The functions accept Python ``int`` (arbitrary precision; used for the fast single-channel
+path) or numpy ``int64`` arrays (the batch path). They are written with shifts and compares
+instead of ``np.round`` (ties to even) or fxpmath (2000x slower in a sample loop) so that the
+rounding is exactly the hardware's: ``floor`` is an arithmetic right shift, ``half_up`` adds
+half an LSB first.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+
+__all__ = ["Rounding", "Overflow", "QFormat", "shift_round", "requantize", "to_raw", "bits_for"]
+
+# numpy int64 holds every intermediate exactly as long as it stays below 2**62 in magnitude
+# (one bit of margin for the rounding add); config validation enforces this bound.
+INT64_SAFE_BITS = 62
+
+
+class Rounding(StrEnum):
+    """How fraction bits are dropped."""
+
+    #: Toward minus infinity: an arithmetic right shift.
+    FLOOR = "floor"
+    #: To nearest, ties toward plus infinity: add half an LSB, then shift right.
+    HALF_UP = "half_up"
+
+
+class Overflow(StrEnum):
+    """What happens when a value does not fit the format."""
+
+    #: Clamp to the most positive / most negative value (the overflow flag is raised).
+    SATURATE = "saturate"
+    #: Keep the low bits, as two's-complement hardware does (the overflow flag is raised).
+    WRAP = "wrap"
+
+
+_QSTR = re.compile(r"^\s*[sS]?[qQ]\s*(-?\d+)\s*\.\s*(-?\d+)\s*$")
+
+
+@dataclass(frozen=True)
+class QFormat:
+    """A signed fixed-point format with its rounding and overflow rules.
+
+    Parameters
+    ----------
+    int_bits:
+        Integer bits, the sign bit included (``>= 1``).
+    frac_bits:
+        Fraction bits (``>= 0``).
+    rounding:
+        Rule applied when a value with more fraction bits is written into this format.
+    overflow:
+        Rule applied when the rounded value is outside the representable range.
+    """
+
+    int_bits: int
+    frac_bits: int
+    rounding: Rounding = Rounding.FLOOR
+    overflow: Overflow = Overflow.SATURATE
+
+    def __post_init__(self):
+        if not isinstance(self.int_bits, int) or isinstance(self.int_bits, bool) or self.int_bits < 1:
+            raise ValueError(f"int_bits must be an integer >= 1 (the sign bit counts), not {self.int_bits!r}")
+        if not isinstance(self.frac_bits, int) or isinstance(self.frac_bits, bool) or self.frac_bits < 0:
+            raise ValueError(f"frac_bits must be an integer >= 0, not {self.frac_bits!r}")
+        try:
+            object.__setattr__(self, "rounding", Rounding(self.rounding))
+        except ValueError:
+            choices = ", ".join(r.value for r in Rounding)
+            raise ValueError(f"rounding must be one of {choices}, not {self.rounding!r}") from None
+        try:
+            object.__setattr__(self, "overflow", Overflow(self.overflow))
+        except ValueError:
+            choices = ", ".join(o.value for o in Overflow)
+            raise ValueError(f"overflow must be one of {choices}, not {self.overflow!r}") from None
+
+    @classmethod
+    def parse(cls, text, *, rounding=Rounding.FLOOR, overflow=Overflow.SATURATE):
+        """Build a format from ``"Q<int>.<frac>"`` (e.g. ``"Q18.8"``)."""
+        match = _QSTR.match(str(text))
+        if not match:
+            raise ValueError(f"format must look like 'Q18.8' (integer bits incl. sign . fraction bits), not {text!r}")
+        return cls(int(match[1]), int(match[2]), rounding, overflow)
+
+    @property
+    def width(self):
+        """Total bits."""
+        return self.int_bits + self.frac_bits
+
+    @property
+    def min_raw(self):
+        return -(1 << (self.width - 1))
+
+    @property
+    def max_raw(self):
+        return (1 << (self.width - 1)) - 1
+
+    @property
+    def lsb(self):
+        """Weight of one LSB."""
+        return 2.0 ** -self.frac_bits
+
+    @property
+    def min_value(self):
+        return self.min_raw * self.lsb
+
+    @property
+    def max_value(self):
+        return self.max_raw * self.lsb
+
+    def covers(self, magnitude):
+        """Whether every value in ``[-magnitude, magnitude]`` is representable."""
+        return magnitude <= self.max_value
+
+    def with_rules(self, *, rounding=None, overflow=None):
+        return QFormat(self.int_bits, self.frac_bits, rounding or self.rounding, overflow or self.overflow)
+
+    def to_float(self, raw):
+        """Real value of raw integer(s)."""
+        return np.asarray(raw, dtype=np.float64) * self.lsb
+
+    def __str__(self):
+        return f"Q{self.int_bits}.{self.frac_bits}"
+
+
+def bits_for(magnitude, frac_bits):
+    """Fewest integer bits (sign included) with which ``Q(i, frac_bits)`` covers ``±magnitude``."""
+    i = 1
+    while QFormat(i, frac_bits).max_value < magnitude:
+        i += 1
+    return i
+
+
+def shift_round(raw, shift, rounding):
+    """Drop ``shift`` fraction bits of ``raw`` (int or int64 array) with ``rounding``.
+
+    A negative ``shift`` appends zero fraction bits, which is exact.
+    """
+    if shift <= 0:
+        return raw << -shift
+    if rounding is Rounding.HALF_UP:
+        return (raw + (1 << (shift - 1))) >> shift
+    return raw >> shift
+
+
+def requantize(raw, src_frac, fmt):
+    """Write the exact value ``raw * 2**-src_frac`` into ``fmt``.
+
+    Returns ``(raw_out, overflowed)``; for arrays, ``overflowed`` is a boolean array.
+    """
+    value = shift_round(raw, src_frac - fmt.frac_bits, fmt.rounding)
+    lo, hi = fmt.min_raw, fmt.max_raw
+    if isinstance(value, np.ndarray):
+        flag = (value > hi) | (value < lo)
+        if fmt.overflow is Overflow.SATURATE:
+            return np.clip(value, lo, hi), flag
+        return ((value - lo) & ((1 << fmt.width) - 1)) + lo, flag
+    if lo <= value <= hi:
+        return value, False
+    if fmt.overflow is Overflow.SATURATE:
+        return (hi if value > hi else lo), True
+    return ((value - lo) & ((1 << fmt.width) - 1)) + lo, True
+
+
+def to_raw(value, fmt):
+    """Quantise real value(s) into ``fmt`` (rounding and overflow rules of ``fmt``).
+
+    Works exactly for any finite float: the float is first expressed as an integer number of
+    ``2**-(fmt.frac_bits + 60)`` units (floats carry 53 significant bits, so nothing is lost
+    for values within the format's range) and then requantised.
+    """
+    guard = 60
+    if np.ndim(value) == 0:
+        v = float(value)
+        if not np.isfinite(v):
+            raise ValueError(f"cannot quantise {value!r} into {fmt}")
+        exact = int(np.floor(v * 2.0 ** (fmt.frac_bits + guard)))
+        # floor() of an already-integral scaled float is exact; any sub-unit part is far below
+        # the rounding position, so floor here never changes the result of the final rounding
+        return requantize(exact, fmt.frac_bits + guard, fmt)
+    out = [to_raw(v, fmt) for v in np.ravel(value)]
+    raws = np.array([r for r, _ in out], dtype=np.int64).reshape(np.shape(value))
+    flags = np.array([f for _, f in out], dtype=bool).reshape(np.shape(value))
+    return raws, flags
+
+
+def make_requantizer(src_frac, fmt, *, vector):
+    """Return ``f(raw) -> (raw_out, overflowed)`` equal to ``requantize(raw, src_frac, fmt)``.
+
+    The closure has its shift, rounding constant and bounds bound in advance: the model's
+    sample loops call it several times per sample, where :func:`requantize`'s dispatch would
+    dominate the run time. ``vector`` selects the numpy (batch) or the Python-int version.
+    """
+    shift = src_frac - fmt.frac_bits
+    half = (1 << (shift - 1)) if (shift > 0 and fmt.rounding is Rounding.HALF_UP) else 0
+    lo, hi = fmt.min_raw, fmt.max_raw
+    mask = (1 << fmt.width) - 1
+    saturate = fmt.overflow is Overflow.SATURATE
+    left = -shift if shift < 0 else 0
+    right = shift if shift > 0 else 0
+
+    if vector:
+        # specialised at creation: a shift of 0 or an add of 0 would still cost a full array pass
+        def rescale(raw):
+            value = raw + half if half else raw
+            if right:
+                value = value >> right
+            if left:
+                value = value << left
+            return value
+
+        if saturate:
+            def requantize_array(raw):
+                value = rescale(raw)
+                clipped = np.clip(value, lo, hi)
+                return clipped, clipped != value
+        else:
+            def requantize_array(raw):
+                value = rescale(raw)
+                wrapped = ((value - lo) & mask) + lo
+                return wrapped, wrapped != value
+        return requantize_array
+
+    # the int closure is specialised too: it runs several times per sample of a Python loop
+    if right and half:
+        def rescale_int(raw):
+            return (raw + half) >> right
+    elif right:
+        def rescale_int(raw):
+            return raw >> right
+    elif left:
+        def rescale_int(raw):
+            return raw << left
+    else:
+        rescale_int = None
+
+    if rescale_int is None and saturate:
+        def requantize_int(raw):
+            if lo <= raw <= hi:
+                return raw, False
+            return (hi if raw > hi else lo), True
+        return requantize_int
+
+    def requantize_int(raw):
+        value = rescale_int(raw) if rescale_int is not None else raw
+        if lo <= value <= hi:
+            return value, False
+        if saturate:
+            return (hi if value > hi else lo), True
+        return ((value - lo) & mask) + lo, True
+    return requantize_int

@@ -1,0 +1,228 @@
+"""Float64 reference Kalman filters for the 2-state model of SPEC §1.
+
+State ``x = [x1, x2]`` (position, rate), ``Phi = [[1, T], [0, 1]]``, ``G = [0, 1]^T``,
+``C = [1, 0]``, process noise ``G Q G^T``, measurement noise ``R``, ``u = 0``.
+
+Three forms, which agree to rounding error (tests pin this):
+
+* :func:`kalman_matrix`: the five matrix equations of the paper (its eqs. 1-5).
+* :func:`kalman_decomposed`: the scalar decomposition of the paper's section 4.3.1 with its two
+  misprints corrected (``pl21`` and ``K2``, see README), vectorised along a batch axis.
+* :func:`steady_state`: the same filter with the constant gain ``K_inf`` of the discrete
+  Riccati equation, i.e. an alpha-beta filter with ``alpha = K1``, ``beta = T*K2``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+__all__ = [
+    "KalmanParams",
+    "kalman_matrix",
+    "kalman_decomposed",
+    "steady_state_gain",
+    "steady_state",
+]
+
+
+def _default_p0():
+    return ((10.0, 0.0), (0.0, 10.0))
+
+
+@dataclass(frozen=True)
+class KalmanParams:
+    """Model parameters (defaults: the paper's T=1, Q=2, R=4, P0=10*I, x0=0).
+
+    Parameters
+    ----------
+    T:
+        Sample period (> 0); with ``T = 1`` the rate ``x2`` is in units per sample.
+    Q:
+        Process noise variance on the rate (>= 0), entering as ``G Q G^T``.
+    R:
+        Measurement noise variance (> 0).
+    P0:
+        Initial error covariance, 2x2 symmetric positive definite.
+    x0:
+        Initial state estimate ``(x1, x2)``.
+    """
+
+    T: float = 1.0
+    Q: float = 2.0
+    R: float = 4.0
+    P0: tuple = field(default_factory=_default_p0)
+    x0: tuple = (0.0, 0.0)
+
+    def __post_init__(self):
+        object.__setattr__(self, "P0", tuple(tuple(float(v) for v in row) for row in self.P0))
+        object.__setattr__(self, "x0", tuple(float(v) for v in self.x0))
+
+    @property
+    def phi(self):
+        return np.array([[1.0, self.T], [0.0, 1.0]])
+
+    @property
+    def gqg(self):
+        return np.array([[0.0, 0.0], [0.0, self.Q]])
+
+    def scaled(self):
+        """The same filter in the units of the datapath: ``v = T*x2`` and ``P' = D P D``.
+
+        With ``D = diag(1, T)`` the model becomes ``Phi' = [[1, 1], [0, 1]]`` and
+        ``Q' = T**2 * Q``: exactly the decomposition with ``T = 1``. The hardware and the
+        bit-accurate model run in these units, so no product by T sits inside the loop.
+        """
+        t = self.T
+        p0 = np.array(self.P0)
+        d = np.diag([1.0, t])
+        return replace(
+            self,
+            T=1.0,
+            Q=self.Q * t * t,
+            P0=tuple(map(tuple, d @ p0 @ d)),
+            x0=(self.x0[0], self.x0[1] * t),
+        )
+
+
+def kalman_matrix(y, params=KalmanParams()):
+    """Run the matrix-form Kalman filter on a 1-D sequence ``y``.
+
+    Returns a dict of arrays: ``x`` (n, 2) filtered states, ``yhat`` (n,) one-step output
+    predictions ``C x_{k|k-1}``, ``K`` (n, 2) gains, ``P`` (n, 2, 2) filtered covariances.
+    """
+    y = np.asarray(y, dtype=np.float64)
+    phi, gqg = params.phi, params.gqg
+    c = np.array([[1.0, 0.0]])
+    x = np.array(params.x0, dtype=np.float64)
+    p = np.array(params.P0, dtype=np.float64)
+    n = len(y)
+    xs, yh, ks, ps = np.empty((n, 2)), np.empty(n), np.empty((n, 2)), np.empty((n, 2, 2))
+    eye = np.eye(2)
+    for k, yk in enumerate(y):
+        # (1) x_{k|k-1} = Phi x_{k-1}
+        x_pred = phi @ x
+        # (2) P_{k|k-1} = Phi P_{k-1} Phi^T + G Q G^T
+        p_pred = phi @ p @ phi.T + gqg
+        # (3) K_k = P_{k|k-1} C^T (C P_{k|k-1} C^T + R)^-1
+        gain = p_pred @ c.T @ np.linalg.inv(c @ p_pred @ c.T + params.R)
+        # (4) x_k = x_{k|k-1} + K_k (y_k - C x_{k|k-1})
+        x = x_pred + (gain @ (yk - c @ x_pred)).ravel()
+        # (5) P_k = (I - K_k C) P_{k|k-1}
+        p = (eye - gain @ c) @ p_pred
+        xs[k], yh[k], ks[k], ps[k] = x, x_pred[0], gain.ravel(), p
+    return {"x": xs, "yhat": yh, "K": ks, "P": ps}
+
+
+#: Names of the quantities :func:`kalman_decomposed` records, in datapath order.
+DECOMPOSED_TRACE = (
+    "xl1", "pl11", "pl12", "pl21", "pl22", "S", "K1", "K2", "e",
+    "x1", "x2", "p11", "p12", "p21", "p22",
+)
+
+
+def kalman_decomposed(y, params=KalmanParams(), *, trace=False):
+    """Run the decomposed (scalar) Kalman filter, vectorised along leading batch axes.
+
+    ``y`` has shape ``(..., n)``; every channel starts from ``params.x0`` and ``params.P0``.
+    Returns a dict with ``x1``, ``x2``, ``yhat`` of the same shape as ``y`` and, with
+    ``trace=True``, every intermediate of :data:`DECOMPOSED_TRACE`.
+    """
+    y = np.asarray(y, dtype=np.float64)
+    n = y.shape[-1]
+    batch = y.shape[:-1]
+    t, q, r = params.T, params.Q, params.R
+    x1 = np.full(batch, params.x0[0])
+    x2 = np.full(batch, params.x0[1])
+    p11, p12, p21, p22 = (np.full(batch, v) for v in (*params.P0[0], *params.P0[1]))
+    names = DECOMPOSED_TRACE if trace else ("xl1", "x1", "x2")
+    rec = {name: np.empty(y.shape) for name in names}
+    for k in range(n):
+        yk = y[..., k]
+        # time update
+        xl1 = x1 + t * x2                                     # xl1 = x1 + T x2
+        xl2 = x2                                              # xl2 = x2
+        pl11 = p11 + t * (p12 + p21) + t * t * p22            # pl11 = p11 + T(p12 + p21) + T^2 p22
+        pl12 = p12 + t * p22                                  # pl12 = p12 + T p22
+        pl21 = p21 + t * p22                                  # pl21 = p21 + T p22  (paper: p22 + T p22)
+        pl22 = p22 + q                                        # pl22 = p22 + Q
+        # gain
+        s = pl11 + r                                          # S = pl11 + R
+        k1 = pl11 / s                                         # K1 = pl11 / S
+        k2 = pl21 / s                                         # K2 = pl21 / S  (paper: pl11 / (pl21 + 4))
+        # measurement update
+        e = yk - xl1                                          # innovation; yhat = xl1
+        x1 = xl1 + k1 * e                                     # x1 = xl1 + K1 e
+        x2 = xl2 + k2 * e                                     # x2 = xl2 + K2 e
+        p11, p12 = pl11 - k1 * pl11, pl12 - k1 * pl12         # p1j = pl1j - K1 pl1j
+        p21, p22 = pl21 - k2 * pl11, pl22 - k2 * pl12         # p2j = pl2j - K2 pl1j
+        if trace:
+            values = (xl1, pl11, pl12, pl21, pl22, s, k1, k2, e, x1, x2, p11, p12, p21, p22)
+        else:
+            values = (xl1, x1, x2)
+        for name, value in zip(names, values, strict=True):
+            rec[name][..., k] = value
+    out = {"x1": rec["x1"], "x2": rec["x2"], "yhat": rec["xl1"]}
+    if trace:
+        out["trace"] = rec
+    return out
+
+
+def steady_state_gain(T=1.0, Q=2.0, R=4.0):
+    """Steady-state gain ``K_inf`` and predicted covariance of the discrete Riccati equation.
+
+    Solves ``P = Phi P Phi^T - Phi P C^T (C P C^T + R)^-1 C P Phi^T + G Q G^T`` (the
+    prediction covariance) with the structure-preserving doubling algorithm, which converges
+    quadratically even when the filter's poles are near 1 (small Q/R), where plain iteration
+    of the recursion needs thousands of steps. Returns ``(K, P_pred)``.
+    """
+    if not T > 0:
+        raise ValueError(f"T must be > 0, not {T!r}")
+    if not Q > 0:
+        raise ValueError(f"Q must be > 0 for a steady-state gain (Q = 0 gives K_inf = 0), not {Q!r}")
+    if not R > 0:
+        raise ValueError(f"R must be > 0, not {R!r}")
+    phi = np.array([[1.0, T], [0.0, 1.0]])
+    c = np.array([[1.0, 0.0]])
+    # Dual (control-form) data: A = Phi^T, G = C^T R^-1 C, H = G Q G^T.
+    a = phi.T.copy()
+    g = c.T @ c / R
+    h = np.array([[0.0, 0.0], [0.0, Q]])
+    eye = np.eye(2)
+    for _ in range(200):
+        w = np.linalg.inv(eye + g @ h)
+        a_next = a @ w @ a
+        g_next = g + a @ w @ g @ a.T
+        h_next = h + a.T @ h @ w @ a
+        done = np.max(np.abs(h_next - h)) <= 1e-15 * np.max(np.abs(h_next))
+        a, g, h = a_next, g_next, h_next
+        if done:
+            break
+    else:  # pragma: no cover - the doubling converges in a few dozen steps for valid inputs
+        raise ArithmeticError("Riccati doubling did not converge")
+    p_pred = (h + h.T) / 2
+    k = (p_pred @ c.T / (c @ p_pred @ c.T + R)).ravel()
+    return k, p_pred
+
+
+def steady_state(y, params=KalmanParams(), gain=None):
+    """Run the constant-gain (steady-state) filter along the last axis of ``y``.
+
+    ``x1 = xl1 + K1 e``, ``x2 = x2 + K2 e`` with ``xl1 = x1 + T x2`` and ``e = y - xl1``.
+    """
+    if gain is None:
+        gain, _ = steady_state_gain(params.T, params.Q, params.R)
+    k1, k2 = gain
+    y = np.asarray(y, dtype=np.float64)
+    batch = y.shape[:-1]
+    x1 = np.full(batch, params.x0[0])
+    x2 = np.full(batch, params.x0[1])
+    out = {name: np.empty(y.shape) for name in ("x1", "x2", "yhat", "e")}
+    for k in range(y.shape[-1]):
+        xl1 = x1 + params.T * x2
+        e = y[..., k] - xl1
+        x1 = xl1 + k1 * e
+        x2 = x2 + k2 * e
+        out["x1"][..., k], out["x2"][..., k], out["yhat"][..., k], out["e"][..., k] = x1, x2, xl1, e
+    return out
