@@ -1,0 +1,189 @@
+"""Fixed-point versus float: the error figures of ``kfpga compare`` and ``kfpga sweep``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from kfpga.config import KalmanConfig, analysed_ranges, default_formats
+from kfpga.model.kalman import FixedKalman
+from kfpga.model.reference import kalman_decomposed, steady_state
+
+__all__ = ["rmse", "sqnr_db", "float_run", "Comparison", "compare", "sweep", "plot_compare", "plot_sweep"]
+
+
+def rmse(estimate, truth):
+    return float(np.sqrt(np.mean((np.asarray(estimate, dtype=np.float64) - truth) ** 2)))
+
+
+def sqnr_db(reference, test):
+    """Signal-to-quantisation-noise ratio of ``test`` against ``reference``, in dB."""
+    noise = float(np.sum((np.asarray(test) - reference) ** 2))
+    signal = float(np.sum(np.asarray(reference) ** 2))
+    if noise == 0.0:
+        return float("inf")
+    return 10.0 * np.log10(signal / noise)
+
+
+def float_run(config, variant, y):
+    """Float64 filter of ``variant`` on ``y``; returns ``(x1, x2, yhat)`` in input units."""
+    if variant == "steady":
+        out = steady_state(y, config.params)
+    else:
+        out = kalman_decomposed(y, config.params)
+    return out["x1"], out["x2"], out["yhat"]
+
+
+@dataclass
+class Comparison:
+    """Result of one fixed-versus-float run; ``metrics`` is what ``--json`` prints."""
+
+    metrics: dict
+    y: np.ndarray
+    truth: np.ndarray | None
+    float_x1: np.ndarray
+    fixed_x1: np.ndarray
+    lsb: float
+    settle: int
+    extra: dict = field(default_factory=dict)
+
+
+def compare(config, variant, y, truth=None, *, settle=None, seed=None, scenario=None):
+    """Run the float and the bit-accurate filter on the same codes ``y`` and measure them.
+
+    RMSE figures skip the first ``settle`` samples (default: 100, or a tenth of short runs),
+    where both filters are still converging from x0; the other figures use every sample.
+    """
+    y = np.asarray(y, dtype=np.int64)
+    n = len(y)
+    settle = min(100, n // 10) if settle is None else settle
+    if not 0 <= settle < n:
+        raise ValueError(f"settle must be in [0, {n}), not {settle}")
+    model = FixedKalman(config, variant=variant)
+    res = model.run(y)
+    fx1, _, _ = model.to_float(res)
+    flx1, _, _ = float_run(config, variant, y)
+    lsb = config.formats["x1"].lsb
+    w = slice(settle, None)
+    metrics = {
+        "variant": variant,
+        "scenario": scenario,
+        "samples": n,
+        "seed": seed,
+        "settle": settle,
+        "rmse_raw": rmse(y[w], truth[w]) if truth is not None else None,
+        "rmse_float": rmse(flx1[w], truth[w]) if truth is not None else None,
+        "rmse_fixed": rmse(fx1[w], truth[w]) if truth is not None else None,
+        "rmse_fixed_over_float": None,
+        "max_abs_fixed_minus_float_lsb": float(np.max(np.abs(fx1 - flx1)) / lsb),
+        "max_abs_fixed_minus_float": float(np.max(np.abs(fx1 - flx1))),
+        "sqnr_db": sqnr_db(flx1, fx1),
+        "overflows": int(np.count_nonzero(res.overflow)),
+        "x1_format": str(config.formats["x1"]),
+        "formats": {name: str(fmt) for name, fmt in config.formats.items()},
+    }
+    if truth is not None and metrics["rmse_float"] > 0:
+        metrics["rmse_fixed_over_float"] = metrics["rmse_fixed"] / metrics["rmse_float"]
+    return Comparison(metrics, y, truth, flx1, fx1, lsb, settle)
+
+
+def sweep_config(params, width, ranges):
+    """Formats for a sweep point: operands ``width`` bits, registers ``width - 10`` fraction bits."""
+    formats = default_formats(params, ranges=ranges, operand_bits=width, state_frac=max(width - 10, 0))
+    return KalmanConfig(params=params, formats=formats, check_ranges=False, max_operand_bits=max(width, 18))
+
+
+def sweep(params, variant, y, truth, widths, *, settle=None, range_source="scenario", progress=None):
+    """Fixed-point error for each operand width; rows of metrics, narrowest good width marked.
+
+    ``range_source`` picks the float run the integer bits come from: the swept signal itself
+    (``"scenario"``) or the full-scale stimulus (``"full-scale"``).
+    """
+    ranges = analysed_ranges(params, y[None, :] if range_source == "scenario" else None)
+    rows = []
+    iterator = progress(widths) if progress else widths
+    for width in iterator:
+        cfg = sweep_config(params, width, ranges)
+        cmp_ = compare(cfg, variant, y, truth, settle=settle)
+        m = cmp_.metrics
+        rows.append({
+            "bits": width,
+            "x1_format": m["x1_format"],
+            "e_format": m["formats"]["e"],
+            "rmse_float": m["rmse_float"],
+            "rmse_fixed": m["rmse_fixed"],
+            "rmse_fixed_over_float": m["rmse_fixed_over_float"],
+            "sqnr_db": m["sqnr_db"],
+            "max_abs_fixed_minus_float": m["max_abs_fixed_minus_float"],
+            "overflows": m["overflows"],
+        })
+    good = [r["bits"] for r in rows if r["rmse_fixed_over_float"] is not None and r["rmse_fixed_over_float"] <= 1.01]
+    # the narrowest width from which every wider width is also within 1 %
+    narrowest = None
+    for r in reversed(rows):
+        if r["bits"] in good:
+            narrowest = r["bits"]
+        else:
+            break
+    return rows, narrowest
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_compare(cmp_, path, title=""):
+    """Truth, noisy input, float and fixed estimates, and the fixed - float error."""
+    plt = _pyplot()
+    n = len(cmp_.y)
+    k = np.arange(n)
+    fig, axes = plt.subplots(3, 1, figsize=(11, 9), sharex=True, constrained_layout=True)
+    ax = axes[0]
+    ax.plot(k, cmp_.y, lw=0.5, color="0.7", label="noisy input y")
+    if cmp_.truth is not None:
+        ax.plot(k, cmp_.truth, lw=1.2, color="k", label="truth")
+    ax.plot(k, cmp_.float_x1, lw=0.8, color="tab:blue", label="float x1")
+    ax.plot(k, cmp_.fixed_x1, lw=0.8, ls="--", color="tab:red", label="fixed x1")
+    ax.set_ylabel("ADC codes")
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_title(title)
+    ax = axes[1]
+    if cmp_.truth is not None:
+        ax.plot(k, cmp_.y - cmp_.truth, lw=0.4, color="0.75", label="input - truth")
+        ax.plot(k, cmp_.float_x1 - cmp_.truth, lw=0.6, color="tab:blue", label="float - truth")
+        ax.plot(k, cmp_.fixed_x1 - cmp_.truth, lw=0.6, color="tab:red", alpha=0.7, label="fixed - truth")
+        ax.axvline(cmp_.settle, color="0.5", ls=":", lw=0.8)
+        ax.legend(loc="upper right", fontsize=8)
+    ax.set_ylabel("estimation error (codes)")
+    ax = axes[2]
+    ax.plot(k, (cmp_.fixed_x1 - cmp_.float_x1) / cmp_.lsb, lw=0.6, color="tab:purple")
+    ax.set_ylabel(f"fixed - float (LSB of x1 = {cmp_.lsb:g})")
+    ax.set_xlabel("sample")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_sweep(rows, narrowest, path, title=""):
+    """RMSE and SQNR against operand width, the narrowest good width marked."""
+    plt = _pyplot()
+    bits = [r["bits"] for r in rows]
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 7), sharex=True, constrained_layout=True)
+    ax1.plot(bits, [r["rmse_fixed"] for r in rows], "o-", color="tab:red", label="fixed")
+    ax1.plot(bits, [r["rmse_float"] for r in rows], "-", color="tab:blue", label="float")
+    ax1.plot(bits, [1.01 * r["rmse_float"] for r in rows], ":", color="tab:blue", label="float + 1 %")
+    if narrowest is not None:
+        ax1.axvline(narrowest, color="tab:green", ls="--", label=f"narrowest within 1 %: {narrowest} bits")
+    ax1.set_ylabel("RMSE vs truth (codes)")
+    ax1.legend(fontsize=8)
+    ax1.set_title(title)
+    ax2.plot(bits, [r["sqnr_db"] for r in rows], "o-", color="tab:purple")
+    ax2.set_ylabel("SQNR fixed vs float (dB)")
+    ax2.set_xlabel("multiplier operand width (bits)")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

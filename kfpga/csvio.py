@@ -1,0 +1,112 @@
+"""Reading users' sample files and writing filter outputs, with errors that name the line."""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from kfpga.model.ranges import ADC_MAX, ADC_MIN
+
+__all__ = ["InputError", "Samples", "read_samples", "write_columns"]
+
+
+class InputError(ValueError):
+    """A user's input file is unusable; the message says where and why."""
+
+
+@dataclass
+class Samples:
+    """Samples read from a CSV file."""
+
+    y: np.ndarray  # int64 ADC codes
+    truth: np.ndarray | None  # float, when the file has a ``truth`` column
+    clipped: int  # values saturated because of ``clip=True``
+    path: str
+
+
+def _number(text, where, column):
+    try:
+        value = float(text)
+    except ValueError:
+        raise InputError(f"{where}: {column} = {text.strip()!r} is not a number") from None
+    if math.isnan(value):
+        raise InputError(f"{where}: {column} is NaN")
+    if math.isinf(value):
+        raise InputError(f"{where}: {column} is infinite")
+    return value
+
+
+def read_samples(path, *, clip=False, column="y"):
+    """Read the ``y`` column (signed 16-bit ADC codes) and, if present, ``truth``.
+
+    Every problem raises :class:`InputError` with the file and line: no such file, no rows, no
+    ``y`` column, a cell that is empty, not a number, NaN, not an integer, or outside
+    [-32768, 32767] (unless ``clip``, which saturates such values and counts them).
+    """
+    path = Path(path)
+    try:
+        handle = path.open(newline="")
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
+    ys, truths, clipped = [], [], 0
+    with handle:
+        reader = csv.reader(handle)
+        try:
+            header = next(reader, None)
+        except (csv.Error, UnicodeDecodeError) as exc:
+            raise InputError(f"{path}: not a readable CSV file ({exc})") from None
+        if header is None:
+            raise InputError(f"{path}: the file is empty (expected a header line with a column named {column!r})")
+        names = [h.strip() for h in header]
+        if column not in names:
+            raise InputError(f"{path}: line 1: no column named {column!r} (the header has: {', '.join(names) or 'nothing'})")
+        iy = names.index(column)
+        it = names.index("truth") if "truth" in names else None
+        try:
+            for row in reader:
+                where = f"{path}: line {reader.line_num}"
+                if not any(cell.strip() for cell in row):
+                    continue  # blank line
+                if iy >= len(row) or not row[iy].strip():
+                    raise InputError(f"{where}: no value in column {column!r}")
+                value = _number(row[iy], where, column)
+                if value != int(value):
+                    raise InputError(f"{where}: {column} = {row[iy].strip()} is not an integer ADC code")
+                if not ADC_MIN <= value <= ADC_MAX:
+                    if not clip:
+                        raise InputError(
+                            f"{where}: {column} = {row[iy].strip()} is outside the signed 16-bit range "
+                            f"[{ADC_MIN}, {ADC_MAX}] (use --clip to saturate such values)"
+                        )
+                    value = min(max(value, ADC_MIN), ADC_MAX)
+                    clipped += 1
+                ys.append(int(value))
+                if it is not None:
+                    if it >= len(row) or not row[it].strip():
+                        raise InputError(f"{where}: no value in column 'truth'")
+                    truths.append(_number(row[it], where, "truth"))
+        except (csv.Error, UnicodeDecodeError) as exc:
+            raise InputError(f"{path}: line {reader.line_num}: not readable as CSV ({exc})") from None
+    if not ys:
+        raise InputError(f"{path}: no data rows after the header")
+    truth = np.array(truths, dtype=np.float64) if it is not None else None
+    return Samples(np.array(ys, dtype=np.int64), truth, clipped, str(path))
+
+
+def write_columns(path, columns):
+    """Write ``{name: array}`` as CSV, one row per element (integers stay integers)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    names = list(columns)
+    arrays = [np.asarray(columns[n]) for n in names]
+    with path.open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(names)
+        cells = [a.astype(int).tolist() if a.dtype.kind == "b" else a.tolist() for a in arrays]
+        writer.writerows(zip(*cells, strict=True))
