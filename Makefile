@@ -1,0 +1,36 @@
+# kfpga: `make demo` runs the main job, `make test` the test suite; both set up .venv first.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed-stamp
+BUILD  := build
+
+.PHONY: demo test bench lint venv clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+test: $(STAMP)
+	$(BIN)/python -m pytest
+
+demo: $(STAMP)
+	mkdir -p $(BUILD)
+	for v in steady full; do \
+	  $(BIN)/kfpga compare --variant $$v --seed 1 --plot $(BUILD)/compare_$$v.png | tee $(BUILD)/compare_$$v.txt && \
+	  $(BIN)/kfpga compare --variant $$v --seed 1 --json > $(BUILD)/compare_$$v.json || exit 1; \
+	done
+	@echo "fixed-vs-float reports: $(BUILD)/compare_*.txt, .json, .png"
+
+bench: $(STAMP)
+	$(BIN)/python bench/bench_model.py
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+
+clean:
+	rm -rf $(BUILD)

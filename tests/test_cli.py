@@ -1,0 +1,168 @@
+"""The command line: reports, JSON, files written, and one-line errors for bad input."""
+
+import csv
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from kfpga.model.kalman import FixedKalman
+
+from kfpga.cli import main
+
+COMPARE_KEYS = {"variant", "samples", "seed", "rmse_raw", "rmse_float", "rmse_fixed",
+                "max_abs_fixed_minus_float_lsb", "sqnr_db", "overflows"}
+
+
+def run_cli(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.mark.parametrize("variant", ["steady", "full"])
+def test_compare_json_default_scenario(capsys, variant):
+    code, out, err = run_cli(capsys, "compare", "--variant", variant, "--seed", "7", "--json")
+    assert code == 0
+    m = json.loads(out)
+    assert set(m) >= COMPARE_KEYS
+    assert (m["variant"], m["samples"], m["seed"]) == (variant, 20000, 7)
+    assert m["rmse_fixed"] <= 1.01 * m["rmse_float"] and m["overflows"] == 0
+    assert "seed 7" in err
+
+
+def test_compare_prints_a_random_seed_that_replays(capsys):
+    code, out1, err = run_cli(capsys, "compare", "--samples", "500", "--json")
+    assert code == 0
+    seed = json.loads(out1)["seed"]
+    assert f"seed {seed}" in err
+    _, out2, _ = run_cli(capsys, "compare", "--samples", "500", "--json", "--seed", str(seed))
+    assert json.loads(out1)["rmse_fixed"] == json.loads(out2)["rmse_fixed"]
+
+
+def test_compare_report_and_plot(capsys, tmp_path):
+    png = tmp_path / "c.png"
+    code, out, _ = run_cli(capsys, "compare", "--scenario", "random-accel", "--samples", "3000", "--seed", "1",
+                           "--plot", str(png))
+    assert code == 0
+    assert "RMSE vs truth" in out and "SQNR" in out and "overflows" in out
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def write_csv(path, header, rows):
+    with path.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(header)
+        w.writerows(rows)
+    return path
+
+
+def test_filter_one_row_per_input_row_bit_exact(capsys, tmp_path):
+    rng = np.random.default_rng(3)
+    y = np.clip(np.round(np.cumsum(rng.normal(0, 50, 700))), -32768, 32767).astype(int)
+    src = write_csv(tmp_path / "in.csv", ["t", "y"], [[i, v] for i, v in enumerate(y)])
+    dst = tmp_path / "out.csv"
+    code, _, err = run_cli(capsys, "filter", "--input", str(src), "--output", str(dst), "--variant", "full")
+    assert code == 0 and "700 samples filtered" in err
+    rows = list(csv.DictReader(dst.open()))
+    assert len(rows) == 700 and list(rows[0]) == ["x1", "x2", "yhat", "overflow"]
+    model = FixedKalman(variant="full")
+    x1, x2, yhat = model.to_float(model.run(y))
+    np.testing.assert_array_equal([float(r["x1"]) for r in rows], x1)
+    np.testing.assert_array_equal([float(r["x2"]) for r in rows], x2)
+    np.testing.assert_array_equal([float(r["yhat"]) for r in rows], yhat)
+
+
+def test_filter_float(capsys, tmp_path):
+    src = write_csv(tmp_path / "in.csv", ["y"], [[v] for v in (0, 10, 20, 30)])
+    dst = tmp_path / "out.csv"
+    assert run_cli(capsys, "filter", "--input", str(src), "--output", str(dst), "--float")[0] == 0
+    rows = list(csv.DictReader(dst.open()))
+    assert len(rows) == 4 and list(rows[0]) == ["x1", "x2", "yhat"]
+
+
+BAD_INPUTS = [
+    (["y"], [["1"], ["abc"]], "line 3: y = 'abc' is not a number"),
+    (["y"], [["1"], ["nan"]], "line 3: y is NaN"),
+    (["y"], [], "no data rows after the header"),
+    (["x", "z"], [["1", "2"]], "line 1: no column named 'y' (the header has: x, z)"),
+    (["y"], [["5"], ["40000"]], "line 3: y = 40000 is outside the signed 16-bit range [-32768, 32767] (use --clip"),
+    (["y"], [["-32769"]], "line 2: y = -32769 is outside"),
+    (["y"], [["1.5"]], "line 2: y = 1.5 is not an integer ADC code"),
+    (["t", "y"], [["1", "2"], ["2"]], "line 3: no value in column 'y'"),
+]
+
+
+@pytest.mark.parametrize(("header", "rows", "message"), BAD_INPUTS)
+@pytest.mark.parametrize("command", ["filter", "compare"])
+def test_bad_input_is_one_clear_line(capsys, tmp_path, header, rows, message, command):
+    src = write_csv(tmp_path / "bad.csv", header, rows)
+    argv = [command, "--input", str(src)] + (["--output", str(tmp_path / "o.csv")] if command == "filter" else [])
+    code, _, err = run_cli(capsys, *argv)
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0] and "Traceback" not in err
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_empty_file_and_missing_file(capsys, tmp_path):
+    empty = tmp_path / "empty.csv"
+    empty.write_text("")
+    code, _, err = run_cli(capsys, "filter", "--input", str(empty), "--output", str(tmp_path / "o.csv"))
+    assert code == 2 and "the file is empty" in err
+    code, _, err = run_cli(capsys, "filter", "--input", str(tmp_path / "nope.csv"), "--output", str(tmp_path / "o.csv"))
+    assert code == 2 and "no such file" in err
+
+
+def test_clip_saturates_and_reports(capsys, tmp_path):
+    src = write_csv(tmp_path / "in.csv", ["y"], [["40000"], ["5"], ["-99999"], ["7"]])
+    dst = tmp_path / "out.csv"
+    code, _, err = run_cli(capsys, "filter", "--input", str(src), "--output", str(dst), "--clip")
+    assert code == 0 and "2 input value(s) saturated" in err
+    assert len(list(csv.DictReader(dst.open()))) == 4
+
+
+def test_bad_config_is_one_clear_line(capsys, tmp_path):
+    cfg = tmp_path / "k.toml"
+    cfg.write_text("[model]\nR = -4.0\n")
+    code, _, err = run_cli(capsys, "compare", "--config", str(cfg), "--samples", "100")
+    assert code == 2 and err.strip() == "kfpga compare: error: model.R must be > 0, not -4.0"
+
+
+def test_sweep_table_png_and_narrowest(capsys, tmp_path):
+    png = tmp_path / "s.png"
+    code, out, _ = run_cli(capsys, "sweep", "--bits", "9:16", "--samples", "4000", "--seed", "2", "--json",
+                           "--plot", str(png), "--quiet")
+    assert code == 0
+    res = json.loads(out)
+    rows = res["rows"]
+    assert [r["bits"] for r in rows] == list(range(9, 17))
+    narrowest = res["narrowest_within_1pct"]
+    assert narrowest is not None
+    for r in rows:
+        within = r["rmse_fixed"] <= 1.01 * r["rmse_float"]
+        if r["bits"] >= narrowest:
+            assert within
+    below = [r for r in rows if r["bits"] == narrowest - 1]
+    assert not below or below[0]["rmse_fixed"] > 1.01 * below[0]["rmse_float"]
+    assert png.stat().st_size > 1000
+
+
+def test_formats_table_and_toml(capsys, tmp_path):
+    code, out, _ = run_cli(capsys, "formats")
+    assert code == 0 and "Q18.8" in out and "multiplier operand" in out
+    code, out, _ = run_cli(capsys, "formats", "--toml")
+    path = tmp_path / "k.toml"
+    path.write_text(out)
+    code, out2, _ = run_cli(capsys, "formats", "--config", str(path))
+    assert code == 0 and "Q17.1" in out2
+
+
+def test_console_script_help_and_usage_errors():
+    exe = [sys.executable, "-m", "kfpga.cli"]
+    out = subprocess.run([*exe, "--help"], capture_output=True, text=True, check=True).stdout
+    for command in ("compare", "sweep", "filter", "formats"):
+        assert command in out
+    bad = subprocess.run([*exe, "compare", "--samples", "-3"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "must be a positive integer" in bad.stderr and "Traceback" not in bad.stderr

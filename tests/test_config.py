@@ -1,0 +1,123 @@
+"""Config: defaults from range analysis, validation messages, TOML round trip."""
+
+import numpy as np
+import pytest
+from kfpga.model.reference import KalmanParams
+
+from kfpga.config import POINTS, ConfigError, KalmanConfig, analysed_ranges
+from kfpga.fixed import QFormat
+
+
+def test_defaults_cover_the_analysed_ranges_with_a_guard_bit():
+    cfg = KalmanConfig()
+    ranges = cfg.ranges()
+    for name, fmt in cfg.formats.items():
+        if name not in ranges:
+            continue
+        assert fmt.covers(ranges[name]), name
+        if name != "e":  # the innovation gives up its guard bit to keep one fraction bit
+            assert fmt.int_bits >= 2 and QFormat(fmt.int_bits - 1, fmt.frac_bits).covers(ranges[name]), name
+            narrower = QFormat(fmt.int_bits - 2, fmt.frac_bits) if fmt.int_bits > 2 else None
+            assert narrower is None or not narrower.covers(ranges[name]), f"{name} has more than one guard bit"
+    for name, point in POINTS.items():
+        if point.operand and name in cfg.formats:
+            assert cfg.formats[name].width <= 18, name
+
+
+def test_default_innovation_covers_a_full_scale_step():
+    e = KalmanConfig().formats["e"]
+    assert e.width == 18 and e.frac_bits >= 1 and e.covers(65535)
+
+
+def test_ranges_reflect_the_full_scale_stimulus():
+    ranges = analysed_ranges(KalmanParams())
+    assert ranges["e"] == 65535.0  # a full-scale step from a settled state
+    assert 32768 < ranges["x1"] < 2 * 32768  # overshoot beyond the input range
+    assert 0.7 < ranges["gain"] < 1.0
+
+
+@pytest.mark.parametrize(("model", "message"), [
+    ({"R": 0.0}, "model.R must be > 0, not 0.0"),
+    ({"R": -4.0}, "model.R must be > 0"),
+    ({"Q": -1.0}, "model.Q must be >= 0, not -1.0"),
+    ({"T": 0.0}, "model.T must be > 0, not 0.0"),
+    ({"T": -1.0}, "model.T must be > 0"),
+    ({"P0": [[1.0, 2.0], [2.0, 1.0]]}, "model.P0 must be positive definite"),
+    ({"P0": [[1.0, 0.5], [0.0, 1.0]]}, "model.P0 must be symmetric"),
+    ({"P0": [[1.0, 0.0], [0.0, 0.0]]}, "model.P0 must be positive definite"),
+    ({"T": "fast"}, "model.T must be a number, not 'fast'"),
+])
+def test_bad_model_parameters_name_the_field(model, message):
+    with pytest.raises(ConfigError, match=message.replace("[", r"\[").replace(".", r"\.")):
+        KalmanConfig.from_dict({"model": model})
+
+
+def test_format_too_narrow_names_field_and_range():
+    with pytest.raises(ConfigError, match=r"formats\.x1 = Q16\.8 covers ±32768.*reaches ±57411.*at least 17 integer bits"):
+        KalmanConfig(formats={"x1": QFormat(16, 8)})
+
+
+def test_product_too_wide_is_rejected():
+    with pytest.raises(ConfigError, match=r"the sum xl1 = x1 \+ v is 71 bits wide with formats\.v = Q17\.8, "
+                                          r"formats\.x1 = Q20\.50.*within 62 bits"):
+        KalmanConfig(formats={"x1": QFormat(20, 50), "xl1": QFormat(20, 50)})
+    with pytest.raises(ConfigError, match=r"the sum x1 = xl1 \+ K1\*e is 63 bits wide with formats\.e = Q17\.1, "
+                                          r"formats\.gain = Q2\.16, formats\.xl1 = Q45\.16"):
+        KalmanConfig(formats={"xl1": QFormat(45, 16)})
+
+
+def test_operand_wider_than_a_multiplier_is_rejected():
+    with pytest.raises(ConfigError, match=r"formats\.e = Q17\.4 is 21 bits wide.*18x18"):
+        KalmanConfig(formats={"e": QFormat(17, 4)})
+
+
+def test_r_too_small_for_its_format():
+    with pytest.raises(ConfigError, match=r"model\.R = 1e-05 rounds to 0 in formats\.s"):
+        KalmanConfig(params=KalmanParams(R=1e-5), formats={"s": QFormat(7, 11)}, check_ranges=False)
+
+
+def test_steady_variant_needs_q():
+    cfg = KalmanConfig(params=KalmanParams(Q=0.0))
+    cfg.require_variant("full")
+    with pytest.raises(ConfigError, match="needs Q > 0"):
+        cfg.require_variant("steady")
+    with pytest.raises(ConfigError, match="variant must be one of steady, full, not 'fast'"):
+        cfg.require_variant("fast")
+
+
+def test_unknown_keys_are_rejected():
+    with pytest.raises(ConfigError, match="unknown key model.P1"):
+        KalmanConfig.from_dict({"model": {"P1": 3}})
+    with pytest.raises(ConfigError, match="formats.x3: unknown quantisation point"):
+        KalmanConfig.from_dict({"formats": {"x3": "Q4.4"}})
+    with pytest.raises(ConfigError, match="unknown section"):
+        KalmanConfig.from_dict({"modle": {}})
+    with pytest.raises(ConfigError, match="formats.x1: rounding must be one of"):
+        KalmanConfig.from_dict({"formats": {"x1": {"format": "Q18.8", "rounding": "up"}}})
+
+
+def test_toml_round_trip(tmp_path):
+    cfg = KalmanConfig(params=KalmanParams(T=0.5, Q=3.0, R=2.0, P0=((5.0, 1.0), (1.0, 4.0)), x0=(3.0, -1.0)),
+                       formats={"x1": QFormat(19, 9, "floor")})
+    path = tmp_path / "k.toml"
+    path.write_text(cfg.to_toml())
+    again = KalmanConfig.from_toml(path)
+    assert again.params == cfg.params
+    assert again.formats == cfg.formats
+
+
+def test_toml_errors(tmp_path):
+    with pytest.raises(ConfigError, match="no such config file"):
+        KalmanConfig.from_toml(tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[model\nT = 1")
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        KalmanConfig.from_toml(bad)
+
+
+def test_defaults_follow_the_model():
+    big = KalmanConfig(params=KalmanParams(R=400.0, Q=2.0, P0=((1000.0, 0.0), (0.0, 1000.0))))
+    ranges = big.ranges()
+    assert big.formats["p"].covers(ranges["p"]) and ranges["p"] == pytest.approx(1000.0)
+    assert big.formats["s"].covers(ranges["s"])
+    np.testing.assert_array_less(0, [big.formats[n].frac_bits for n in ("pl", "gain", "e")])
