@@ -139,33 +139,49 @@ def _pyplot():
 
 
 def plot_compare(cmp_, path, title=""):
-    """Truth, noisy input, float and fixed estimates, and the fixed - float error."""
+    """Overview, a zoomed window, the estimation errors and the fixed - float difference."""
     plt = _pyplot()
     n = len(cmp_.y)
     k = np.arange(n)
-    fig, axes = plt.subplots(3, 1, figsize=(11, 9), sharex=True, constrained_layout=True)
+    # the zoom: 60 samples around the largest |signal| after settling (a peak, where the slope
+    # is small), so single noisy samples and the two estimates can be told apart
+    ref = cmp_.truth if cmp_.truth is not None else cmp_.float_x1
+    centre = cmp_.settle + int(np.argmax(np.abs(ref[cmp_.settle:])))
+    z0 = min(max(centre - 30, 0), max(n - 60, 0))
+    z = slice(z0, min(z0 + 60, n))
+    fig, axes = plt.subplots(4, 1, figsize=(11, 12), constrained_layout=True)
     ax = axes[0]
-    ax.plot(k, cmp_.y, lw=0.5, color="0.7", label="noisy input y")
+    ax.plot(k, cmp_.y, lw=0.4, color="0.7", label="noisy input y")
     if cmp_.truth is not None:
-        ax.plot(k, cmp_.truth, lw=1.2, color="k", label="truth")
-    ax.plot(k, cmp_.float_x1, lw=0.8, color="tab:blue", label="float x1")
-    ax.plot(k, cmp_.fixed_x1, lw=0.8, ls="--", color="tab:red", label="fixed x1")
+        ax.plot(k, cmp_.truth, lw=1.0, color="k", label="truth")
+    ax.plot(k, cmp_.fixed_x1, lw=0.8, color="tab:red", label="fixed x1")
+    ax.axvspan(z.start, z.stop, color="tab:orange", alpha=0.2, label="zoom below")
     ax.set_ylabel("ADC codes")
     ax.legend(loc="upper right", fontsize=8)
     ax.set_title(title)
     ax = axes[1]
+    ax.plot(k[z], cmp_.y[z], ".", ms=5, color="0.55", label="noisy input y")
     if cmp_.truth is not None:
-        ax.plot(k, cmp_.y - cmp_.truth, lw=0.4, color="0.75", label="input - truth")
-        ax.plot(k, cmp_.float_x1 - cmp_.truth, lw=0.6, color="tab:blue", label="float - truth")
-        ax.plot(k, cmp_.fixed_x1 - cmp_.truth, lw=0.6, color="tab:red", alpha=0.7, label="fixed - truth")
-        ax.axvline(cmp_.settle, color="0.5", ls=":", lw=0.8)
-        ax.legend(loc="upper right", fontsize=8)
-    ax.set_ylabel("estimation error (codes)")
+        ax.plot(k[z], cmp_.truth[z], lw=1.4, color="k", label="truth")
+    ax.plot(k[z], cmp_.float_x1[z], lw=1.0, color="tab:blue", label="float x1")
+    ax.plot(k[z], cmp_.fixed_x1[z], lw=1.0, ls="--", color="tab:red", label="fixed x1")
+    ax.set_ylabel("ADC codes (zoom)")
+    ax.legend(loc="upper right", fontsize=8)
     ax = axes[2]
-    ax.plot(k, (cmp_.fixed_x1 - cmp_.float_x1) / cmp_.lsb, lw=0.6, color="tab:purple")
-    ax.set_ylabel(f"fixed - float (LSB of x1 = {cmp_.lsb:g})")
+    if cmp_.truth is not None:
+        ax.plot(k, cmp_.y - cmp_.truth, lw=0.3, color="0.8", label="input - truth")
+        ax.plot(k, cmp_.float_x1 - cmp_.truth, lw=0.4, color="tab:blue", label="float - truth")
+        ax.plot(k, cmp_.fixed_x1 - cmp_.truth, lw=0.4, color="tab:red", alpha=0.6, label="fixed - truth")
+        ax.axvline(cmp_.settle, color="0.4", ls=":", lw=0.8, label="end of settling")
+        ax.legend(loc="upper right", fontsize=8)
+    else:
+        ax.text(0.5, 0.5, "no truth in the input", ha="center", transform=ax.transAxes)
+    ax.set_ylabel("estimation error (codes)")
+    ax = axes[3]
+    ax.plot(k, (cmp_.fixed_x1 - cmp_.float_x1) / cmp_.lsb, lw=0.4, color="tab:purple")
+    ax.set_ylabel(f"fixed - float\n(LSB of x1 = {cmp_.lsb:g})")
     ax.set_xlabel("sample")
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=100)
     plt.close(fig)
 
 
