@@ -20,9 +20,9 @@ import apytypes as apy
 import numpy as np
 from filterpy.kalman import KalmanFilter
 from fxpmath import Fxp
-from kfpga.model.kalman import FixedKalman
 
 from kfpga.config import INPUT_FORMAT, KalmanConfig
+from kfpga.model.kalman import FixedKalman
 from kfpga.scenarios import sine
 
 SEED = 20080525

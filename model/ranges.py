@@ -13,6 +13,7 @@ from __future__ import annotations
 import functools
 
 import numpy as np
+
 from kfpga.model.reference import KalmanParams, kalman_decomposed, steady_state, steady_state_gain
 
 __all__ = ["ADC_MIN", "ADC_MAX", "RANGE_SEED", "range_stimulus", "analyse_ranges"]

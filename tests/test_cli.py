@@ -7,9 +7,9 @@ import sys
 
 import numpy as np
 import pytest
-from kfpga.model.kalman import FixedKalman
 
 from kfpga.cli import main
+from kfpga.model.kalman import FixedKalman
 
 COMPARE_KEYS = {"variant", "samples", "seed", "rmse_raw", "rmse_float", "rmse_fixed",
                 "max_abs_fixed_minus_float_lsb", "sqnr_db", "overflows"}

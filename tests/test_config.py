@@ -2,10 +2,10 @@
 
 import numpy as np
 import pytest
-from kfpga.model.reference import KalmanParams
 
 from kfpga.config import POINTS, ConfigError, KalmanConfig, analysed_ranges
 from kfpga.fixed import QFormat
+from kfpga.model.reference import KalmanParams
 
 
 def test_defaults_cover_the_analysed_ranges_with_a_guard_bit():

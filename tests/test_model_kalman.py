@@ -12,12 +12,12 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
-from kfpga.model.kalman import FixedKalman, divide
-from kfpga.model.reference import KalmanParams
 
 from kfpga.analysis import float_run, rmse
 from kfpga.config import ConfigError, KalmanConfig, default_formats
 from kfpga.fixed import Overflow, QFormat, Rounding
+from kfpga.model.kalman import FixedKalman, divide
+from kfpga.model.reference import KalmanParams
 from kfpga.scenarios import SINE_AMPLITUDE, SINE_PERIOD, sine
 
 SEED = 5150

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 from filterpy.kalman import KalmanFilter
+
 from kfpga.model.reference import (
     KalmanParams,
     kalman_decomposed,

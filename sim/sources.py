@@ -1,0 +1,75 @@
+"""Analog signal sources for the ADS8364 model: six channels, one value per sampling instant."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from kfpga import scenarios
+from kfpga.csvio import read_samples
+from kfpga.model.reference import KalmanParams
+
+__all__ = ["Source", "scenario_source", "csv_source"]
+
+
+class Source:
+    """Pre-computed codes ``(6, n)`` handed out one column per conversion.
+
+    ``glitches`` maps a conversion index to ``(channel, code)``: that sample is replaced, e.g.
+    by a full-scale spike, to model an ADC glitch. Past the end, the codes repeat from the
+    start (long simulations of a short recording).
+    """
+
+    def __init__(self, codes, *, truth=None, glitches=None, name="source"):
+        codes = np.asarray(codes, dtype=np.int64)
+        if codes.ndim != 2 or codes.shape[0] != 6 or codes.shape[1] == 0:
+            raise ValueError(f"codes must have shape (6, n) with n > 0, not {codes.shape}")
+        if codes.min() < -32768 or codes.max() > 32767:
+            raise ValueError("codes must be signed 16-bit values")
+        self.codes = codes
+        self.truth = truth
+        self.glitches = dict(glitches or {})
+        self.name = name
+        self.index = 0
+
+    def next(self):
+        k = self.index
+        column = self.codes[:, k % self.codes.shape[1]].copy()
+        if k in self.glitches:
+            channel, code = self.glitches[k]
+            column[channel] = code
+        self.index += 1
+        return column
+
+    def expected(self, count):
+        """The first ``count`` columns this source hands out (glitches included)."""
+        cols = [self.codes[:, k % self.codes.shape[1]].copy() for k in range(count)]
+        for k, (channel, code) in self.glitches.items():
+            if k < count:
+                cols[k][channel] = code
+        return np.array(cols).T
+
+
+def scenario_source(name, n, seed, params=None, *, glitches=None):
+    """Six channels of scenario ``name``: independent noise, channel c phase-shifted by c/6 turn.
+
+    The phase shift keeps the channels distinguishable, so a channel mix-up cannot go unseen.
+    """
+    params = KalmanParams() if params is None else params
+    truth, y = scenarios.make(name, n + 6 * 337, seed, params, batch=(6,))
+    # shift channel c by c * 337 samples: distinct waveforms from one seeded run
+    shifted = np.stack([y[c, c * 337: c * 337 + n] for c in range(6)])
+    truths = np.stack([truth[c, c * 337: c * 337 + n] for c in range(6)])
+    return Source(shifted, truth=truths, glitches=glitches, name=f"{name} (seed {seed})")
+
+
+def csv_source(path, *, clip=False):
+    """Replay a CSV: columns ``y0``..``y5`` if present, else the ``y`` column on all six."""
+    import csv
+
+    with open(path, newline="") as handle:
+        header = [h.strip() for h in next(csv.reader(handle), [])]
+    if all(f"y{c}" in header for c in range(6)):
+        codes = np.stack([read_samples(path, clip=clip, column=f"y{c}").y for c in range(6)])
+    else:
+        codes = np.tile(read_samples(path, clip=clip).y, (6, 1))
+    return Source(codes, name=f"csv {path}")
