@@ -24,7 +24,8 @@ demo: $(STAMP)
 	  $(BIN)/kfpga compare --variant $$v --seed 1 --plot $(BUILD)/compare_$$v.png | tee $(BUILD)/compare_$$v.txt && \
 	  $(BIN)/kfpga compare --variant $$v --seed 1 --json > $(BUILD)/compare_$$v.json || exit 1; \
 	done
-	@echo "fixed-vs-float reports: $(BUILD)/compare_*.txt, .json, .png"
+	for v in steady full; do $(BIN)/kfpga generate --variant $$v --out $(BUILD)/$$v || exit 1; done
+	@echo "fixed-vs-float reports: $(BUILD)/compare_*.txt, .json, .png; Verilog: $(BUILD)/steady, $(BUILD)/full"
 
 bench: $(STAMP)
 	$(BIN)/python bench/bench_model.py

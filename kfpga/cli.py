@@ -272,6 +272,49 @@ def _run_formats(args):
     return 0
 
 
+# -- generate --------------------------------------------------------------------------------
+
+
+def _adc_channel(text):
+    from kfpga.ads8364 import CHANNELS
+
+    if text.upper() in CHANNELS:
+        return CHANNELS.index(text.upper())
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= 5:
+        raise argparse.ArgumentTypeError(f"must be 0..5 or one of {', '.join(CHANNELS)}, not {text!r}")
+    return value
+
+
+def _run_generate(args):
+    from kfpga.hw.generate import TOP_NAME, write_top
+    from kfpga.tools import iverilog_parse, iverilog_path, verilator_lint
+
+    config = _load_config(args.config)
+    config.require_variant(args.variant)
+    if args.ratio < 2:
+        raise UsageError(f"--ratio must be >= 2, not {args.ratio}")
+    path, _ = write_top(args.out, config, variant=args.variant, six_channel=args.channels == 6,
+                        channel=args.channel, ratio=args.ratio)
+    print(f"wrote {path} ({args.variant} core, {args.channels} channel(s), x1 {config.formats['x1']} on out_data)")
+    if not args.no_lint:
+        rc, out = verilator_lint(path, TOP_NAME, path.parent / "verilator_lint.vlt")
+        if rc:
+            raise UsageError(f"verilator --lint-only -Wall reports problems in {path}:\n{out}")
+        print("verilator --lint-only -Wall: clean (waivers and their reasons: verilator_lint.vlt)")
+        if iverilog_path():
+            rc, out = iverilog_parse(path, TOP_NAME)
+            if rc:
+                raise UsageError(f"iverilog -g2001 rejects {path}:\n{out}")
+            print("iverilog -g2001: parses")
+        else:
+            print("iverilog not installed: Verilog-2001 parse check skipped")
+    return 0
+
+
 # -- main ------------------------------------------------------------------------------------
 
 
@@ -330,13 +373,20 @@ def build_parser():
     p.add_argument("--json", action="store_true", help="print the table as JSON")
     p.set_defaults(func=_run_formats)
 
-    for register in _EXTRA_COMMANDS:
-        register(sub)
+    p = sub.add_parser("generate", help="write the Verilog of the whole design (and the Quartus project)",
+                       description="Write plain Verilog-2001 of the top level (clock divider, ADS8364 controller, "
+                                   "Kalman core, output port) into DIR, with the Verilator lint waivers.")
+    p.add_argument("--variant", choices=("steady", "full"), default="steady", help="Kalman core (default: steady)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
+    p.add_argument("--config", metavar="TOML", help="model parameters and formats")
+    p.add_argument("--channels", type=int, choices=(1, 6), default=1,
+                   help="1: filter one ADC channel; 6: sample all six with one HOLD and filter each (default: 1)")
+    p.add_argument("--channel", type=_adc_channel, default=0, metavar="CH",
+                   help="the channel of --channels 1: 0..5 or A0, A1, B0, B1, C0, C1 (default: A0)")
+    p.add_argument("--ratio", type=int, default=10, metavar="N", help="system clock / ADC clock (default: 10)")
+    p.add_argument("--no-lint", action="store_true", help="skip the Verilator lint and Icarus parse checks")
+    p.set_defaults(func=_run_generate)
     return parser
-
-
-#: Registration hooks of commands defined in other modules (generate, simulate, resources).
-_EXTRA_COMMANDS = []
 
 
 def main(argv=None):

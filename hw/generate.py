@@ -1,0 +1,95 @@
+"""Verilog-2001 from the Amaranth designs, with the lint waivers that go with it."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from amaranth.back import verilog
+
+from kfpga.hw.ads8364 import ADS8364Controller
+from kfpga.hw.clockdiv import ClockDivider
+from kfpga.hw.kalman import make_core
+from kfpga.hw.top import KalmanSystem
+
+__all__ = ["TOP_NAME", "LINT_WAIVERS", "to_verilog", "write_top", "write_block", "FORBIDDEN"]
+
+TOP_NAME = "kfpga_top"
+
+#: Verilator -Wall rules waived for the generated files, and why each is harmless.
+LINT_WAIVERS = {
+    "WIDTHEXPAND": "Amaranth types every operation exactly; Yosys's Verilog leaves the extension of a narrower "
+                   "operand to the language (sign extension under $signed), which is value-preserving. The "
+                   "co-simulation against the model proves the values.",
+    "WIDTHTRUNC": "the narrowings are Amaranth's explicit slices (the low bits kept after saturation, a "
+                  "remainder known to be below the divisor) and logical operators on multi-bit selects; none "
+                  "drops a bit of a value that can be set",
+    "UNUSEDSIGNAL": "unused bits of internal wires: upper bits of full-width products and sums, and payload "
+                    "fields (x2, yhat) that the top level does not route to pins",
+    "PROCASSINIT": "registers carry their power-up value in the declaration (reg r = init;) and are assigned "
+                   "in always blocks: the FPGA power-up state, which Quartus honours",
+    "CASEINCOMPLETE": "every case statement is preceded by a default assignment of the same variable, so no "
+                      "latch is implied and an unlisted value keeps the default",
+    "DECLFILENAME": "the submodules (kfpga_top__controller, ...) are written into the top's file on purpose: "
+                    "one Verilog file per design for the Quartus project",
+}
+
+#: Constructs that must not appear in the synthesised Verilog (simulation-only or SystemVerilog).
+FORBIDDEN = ("$display", "$finish", "$stop", "$random", "initial begin", "always_ff", "always_comb",
+             "logic ", "`timescale", "#1", "assert property")
+
+
+_ESCAPED_MODULE = re.compile(r"^module \\(\S+) ", re.MULTILINE)
+
+
+def to_verilog(elaboratable, name):
+    """Verilog text of ``elaboratable`` as module ``name`` (no source locations: reproducible).
+
+    Amaranth names submodules ``\\top.sub`` (escaped identifiers); they are renamed to plain
+    identifiers (``top__sub``), the most conservative input for older synthesis tools.
+    """
+    text = verilog.convert(elaboratable, name=name, emit_src=False)
+    for escaped in sorted(set(_ESCAPED_MODULE.findall(text)), key=len, reverse=True):
+        plain = re.sub(r"[^A-Za-z0-9_]", "_", escaped.replace(".", "__"))
+        text = text.replace(f"\\{escaped} ", f"{plain} ")
+    return text
+
+
+def write_lint_waivers(out_dir, file_glob):
+    path = Path(out_dir) / "verilator_lint.vlt"
+    lines = ["`verilator_config", "// Lint waivers (-Wall) for the generated Verilog: each rule and why it is harmless."]
+    for rule, why in LINT_WAIVERS.items():
+        lines += [f"// {rule}: {why}", f'lint_off -rule {rule} -file "{file_glob}"']
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def write_top(out_dir, config, *, variant, six_channel=False, channel=0, ratio=10, timeout_periods=40):
+    """Write ``kfpga_top.v`` (and the lint waivers) into ``out_dir``; returns ``(verilog path, top)``."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    top = KalmanSystem(config, variant=variant, six_channel=six_channel, channel=channel, ratio=ratio,
+                       timeout_periods=timeout_periods)
+    path = out_dir / f"{TOP_NAME}.v"
+    path.write_text(to_verilog(top, TOP_NAME))
+    write_lint_waivers(out_dir, f"*{TOP_NAME}.v")
+    return path, top
+
+
+def write_block(out_dir, block, config=None, **params):
+    """Write one block on its own (for unit co-simulation): ``core``, ``divider`` or ``controller``."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if block == "core":
+        dut = make_core(config, params.pop("variant"), **params)
+    elif block == "divider":
+        dut = ClockDivider(**params)
+    elif block == "controller":
+        dut = ADS8364Controller(**params)
+    else:
+        raise ValueError(f"block must be core, divider or controller, not {block!r}")
+    name = f"kfpga_{block}"
+    path = out_dir / f"{name}.v"
+    path.write_text(to_verilog(dut, name))
+    write_lint_waivers(out_dir, f"*{name}.v")
+    return path, dut

@@ -1,0 +1,117 @@
+"""Top level: clock divider + ADS8364 controller + Kalman core + output port."""
+
+from amaranth import ClockDomain, ClockSignal, Module, signed
+from amaranth.lib import wiring
+from amaranth.lib.cdc import ResetSynchronizer
+from amaranth.lib.wiring import In, Out, connect
+
+from kfpga.hw.ads8364 import ADS8364Controller
+from kfpga.hw.clockdiv import ClockDivider
+from kfpga.hw.kalman import make_core
+
+__all__ = ["KalmanSystem", "PORTS"]
+
+#: Top-level ports: name -> (direction, width, description). The pin table and the .sdc use it.
+PORTS = {
+    "clk50": ("in", 1, "50 MHz oscillator"),
+    "rst_n": ("in", 1, "reset, active low, asynchronous (synchronised inside)"),
+    "adc_clk": ("out", 1, "ADS8364 CLK, 5 MHz, from a register"),
+    "adc_hold_a_n": ("out", 1, "ADS8364 HOLDA"),
+    "adc_hold_b_n": ("out", 1, "ADS8364 HOLDB"),
+    "adc_hold_c_n": ("out", 1, "ADS8364 HOLDC"),
+    "adc_eoc_n": ("in", 1, "ADS8364 EOC"),
+    "adc_cs_n": ("out", 1, "ADS8364 CS"),
+    "adc_rd_n": ("out", 1, "ADS8364 RD"),
+    "adc_wr_n": ("out", 1, "ADS8364 WR (held high)"),
+    "adc_byte": ("out", 1, "ADS8364 BYTE (held low: 16-bit reads)"),
+    "adc_add": ("out", 1, "ADS8364 ADD (held low)"),
+    "adc_reset_n": ("out", 1, "ADS8364 RESET"),
+    "adc_addr": ("out", 3, "ADS8364 A2..A0 (adc_addr[0] = A0)"),
+    "adc_data": ("in", 16, "ADS8364 D15..D0"),
+    "out_data": ("out", None, "filtered value x1, two's complement in the x1 format"),
+    "out_channel": ("out", 3, "channel of out_data (0..5 = A0..C1)"),
+    "out_valid": ("out", 1, "one-cycle strobe: out_data and out_channel are new"),
+    "out_overflow": ("out", 1, "sticky: a saturation happened in the filter"),
+    "out_timeout": ("out", 1, "sticky: an EOC timeout happened"),
+}
+
+
+class KalmanSystem(wiring.Component):
+    """The whole FPGA design for one ADS8364.
+
+    Parameters
+    ----------
+    config:
+        Shared :class:`~kfpga.config.KalmanConfig`.
+    variant:
+        ``"steady"`` or ``"full"``: which Kalman core.
+    six_channel:
+        Sample and filter all six channels (one HOLD for all); else only ``channel``.
+    channel:
+        The channel of single-channel mode, 0..5.
+    ratio:
+        System clock / ADC clock (10: 50 MHz -> 5 MHz).
+    timeout_periods:
+        EOC timeout in ADC CLK periods.
+
+    Members
+    -------
+    See :data:`PORTS`; ``out_data`` is as wide as the x1 format.
+    """
+
+    def __init__(self, config, *, variant="steady", six_channel=False, channel=0, ratio=10, timeout_periods=40):
+        self.config = config
+        self.variant = variant
+        self.six_channel = bool(six_channel)
+        self.channel = channel
+        self.ratio = ratio
+        self.divider = ClockDivider(ratio=ratio)
+        self.controller = ADS8364Controller(channel=channel, six_channel=six_channel, timeout_periods=timeout_periods)
+        self.core = make_core(config, variant, channels=6 if six_channel else 1)
+        width = config.formats["x1"].width
+        members = {}
+        for name, (direction, bits, _) in PORTS.items():
+            shape = signed(width) if name == "out_data" else bits
+            init = 1 if name in ("rst_n", "adc_eoc_n") else 0
+            members[name] = In(shape, init=init) if direction == "in" else Out(shape)
+        super().__init__(members)
+
+    def elaborate(self, platform):
+        m = Module()
+        m.domains.sync = ClockDomain("sync", local=True)
+        m.d.comb += ClockSignal("sync").eq(self.clk50)
+        m.submodules.reset_sync = ResetSynchronizer(~self.rst_n, domain="sync")
+
+        m.submodules.divider = divider = self.divider
+        m.submodules.controller = ctrl = self.controller
+        m.submodules.core = core = self.core
+
+        word = ctrl.word
+        m.d.comb += [
+            ctrl.strobe.eq(divider.strobe),
+            ctrl.enable.eq(1),
+            ctrl.eoc.eq(self.adc_eoc_n),
+            ctrl.data.eq(self.adc_data),
+            self.adc_clk.eq(divider.clk_out),
+            self.adc_hold_a_n.eq(word.hold_a),
+            self.adc_hold_b_n.eq(word.hold_b),
+            self.adc_hold_c_n.eq(word.hold_c),
+            self.adc_cs_n.eq(word.cs),
+            self.adc_rd_n.eq(word.rd),
+            self.adc_wr_n.eq(word.wr),
+            self.adc_byte.eq(word.byte),
+            self.adc_add.eq(word.add),
+            self.adc_reset_n.eq(word.reset),
+            self.adc_addr.eq(ctrl.addr),
+        ]
+        connect(m, ctrl.o, core.i)
+        # the output port has no backpressure: each estimate is presented for one cycle
+        m.d.comb += [
+            core.o.ready.eq(1),
+            self.out_valid.eq(core.o.valid),
+            self.out_data.eq(core.o.payload.x1),
+            self.out_channel.eq(core.o.payload.channel),
+            self.out_overflow.eq(core.overflow),
+            self.out_timeout.eq(ctrl.timeout),
+        ]
+        return m

