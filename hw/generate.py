@@ -10,7 +10,7 @@ from amaranth.back import verilog
 from kfpga.hw.ads8364 import ADS8364Controller
 from kfpga.hw.clockdiv import ClockDivider
 from kfpga.hw.kalman import make_core
-from kfpga.hw.top import KalmanSystem
+from kfpga.hw.top import AdcFrontend, KalmanSystem
 
 __all__ = ["TOP_NAME", "LINT_WAIVERS", "to_verilog", "write_top", "write_block", "FORBIDDEN"]
 
@@ -77,7 +77,8 @@ def write_top(out_dir, config, *, variant, six_channel=False, channel=0, ratio=1
 
 
 def write_block(out_dir, block, config=None, **params):
-    """Write one block on its own (for unit co-simulation): ``core``, ``divider`` or ``controller``."""
+    """Write one block on its own (for unit co-simulation): ``core``, ``divider``, ``controller`` or
+    ``frontend`` (divider + controller with the board's ADC pin names)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     if block == "core":
@@ -86,8 +87,10 @@ def write_block(out_dir, block, config=None, **params):
         dut = ClockDivider(**params)
     elif block == "controller":
         dut = ADS8364Controller(**params)
+    elif block == "frontend":
+        dut = AdcFrontend(**params)
     else:
-        raise ValueError(f"block must be core, divider or controller, not {block!r}")
+        raise ValueError(f"block must be core, divider, controller or frontend, not {block!r}")
     name = f"kfpga_{block}"
     path = out_dir / f"{name}.v"
     path.write_text(to_verilog(dut, name))

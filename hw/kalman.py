@@ -44,6 +44,20 @@ def _state_array(channels, shape, init, name):
     return Array(Signal(shape, init=init, name=f"{name}_{c}") for c in range(channels))
 
 
+def _select(states, index):
+    """``states[index]`` as a chain of ``Mux`` (Verilog ``assign``), not a case statement.
+
+    An ``Array`` read becomes an ``always @*`` case block, which an event-driven simulator
+    (Icarus) leaves undefined until one of its inputs changes: with channel 0 first and the
+    state still at its power-up value, that never happens. A mux chain is a continuous
+    assignment and is defined from time zero. An index outside the array reads zero.
+    """
+    value = Const(0, states[0].shape())
+    for k in reversed(range(len(states))):
+        value = Mux(index == k, states[k], value)
+    return value
+
+
 def _x2_output(m, d, v):
     """x2 = v / T: a shift when T = 2**k (here only the binary point moves), else v * (1/T)."""
     f = d.config.formats
@@ -130,7 +144,7 @@ class SteadyKalman(wiring.Component):
 
         # stage 2: the update
         index = a_channel if self.channels > 1 else 0
-        x1, v = x1s[index], vs[index]
+        x1, v = (_select(x1s, index), _select(vs, index)) if self.channels > 1 else (x1s[0], vs[0])
         xl1_full, xl1_frac = align_sum([x1, v], [f["x1"].frac_bits, f["v"].frac_bits])
         xl1, f_xl1 = requantize(m, xl1_full, xl1_frac, f["xl1"], name="xl1")        # xl1 = x1 + v
         gw = f["gain"].width
@@ -290,23 +304,21 @@ class FullKalman(wiring.Component):
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
 
-        with m.FSM(name="schedule"):
+        with m.FSM(name="schedule") as fsm:
             with m.State("IDLE"):
-                m.d.comb += self.i.ready.eq(1)
                 with m.If(self.i.valid):
                     m.d.sync += [
                         channel.eq(self.i.payload.channel),
                         sample.eq(self.i.payload.sample),
-                        x1.eq(x1s[index]),
-                        v.eq(vs[index]),
-                        p11.eq(ps[0][index]),
-                        p12.eq(ps[1][index]),
-                        p21.eq(ps[2][index]),
-                        p22.eq(ps[3][index]),
+                        x1.eq(_select(x1s, index)),
+                        v.eq(_select(vs, index)),
+                        p11.eq(_select(ps[0], index)),
+                        p12.eq(_select(ps[1], index)),
+                        p21.eq(_select(ps[2], index)),
+                        p22.eq(_select(ps[3], index)),
                     ]
                     m.next = "TU"
             with m.State("TU"):
-                m.d.comb += [div1.i.valid.eq(1), div2.i.valid.eq(1)]
                 m.d.sync += [
                     xl1.eq(xl1_c), pl11.eq(pl11_c), pl12.eq(pl12_c), pl21.eq(pl21_c), pl22.eq(pl22_c), e.eq(e_c),
                     flags.eq(f1 | f2 | f3 | f4 | f5 | f6 | f9),
@@ -342,6 +354,13 @@ class FullKalman(wiring.Component):
                     with m.If(wb_flags):
                         m.d.sync += self.overflow.eq(1)
                     m.next = "IDLE"
+        # plain assignments (Verilog `assign`), not case-statement outputs: no simulator can
+        # leave them undefined at time zero while the state has not changed yet
+        m.d.comb += [
+            self.i.ready.eq(fsm.ongoing("IDLE")),
+            div1.i.valid.eq(fsm.ongoing("TU")),
+            div2.i.valid.eq(fsm.ongoing("TU")),
+        ]
         return m
 
 

@@ -1,15 +1,15 @@
 """Top level: clock divider + ADS8364 controller + Kalman core + output port."""
 
 from amaranth import ClockDomain, ClockSignal, Module, signed
-from amaranth.lib import wiring
+from amaranth.lib import stream, wiring
 from amaranth.lib.cdc import ResetSynchronizer
 from amaranth.lib.wiring import In, Out, connect
 
-from kfpga.hw.ads8364 import ADS8364Controller
+from kfpga.hw.ads8364 import ADS8364Controller, SampleLayout
 from kfpga.hw.clockdiv import ClockDivider
 from kfpga.hw.kalman import make_core
 
-__all__ = ["KalmanSystem", "PORTS"]
+__all__ = ["KalmanSystem", "AdcFrontend", "PORTS", "ADC_PINS"]
 
 #: Top-level ports: name -> (direction, width, description). The pin table and the .sdc use it.
 PORTS = {
@@ -36,8 +36,73 @@ PORTS = {
 }
 
 
+def _pin_members(names, out_width=None):
+    members = {}
+    for name in names:
+        direction, bits, _ = PORTS[name]
+        shape = signed(out_width) if name == "out_data" else bits
+        init = 1 if name in ("rst_n", "adc_eoc_n") else 0
+        members[name] = In(shape, init=init) if direction == "in" else Out(shape)
+    return members
+
+
+ADC_PINS = [name for name in PORTS if name.startswith("adc_")]
+
+
+class AdcFrontend(wiring.Component):
+    """Clock divider + ADS8364 controller, with the ADC pins named as on the board.
+
+    Parameters
+    ----------
+    six_channel, channel, ratio, timeout_periods:
+        As :class:`KalmanSystem`.
+
+    Members
+    -------
+    adc_* : the ADS8364 pins of :data:`PORTS`
+    o : Out(stream.Signature(SampleLayout))
+        One (channel, sample) word per channel per conversion.
+    timeout : Out(1)
+        Sticky EOC timeout flag.
+    """
+
+    def __init__(self, *, six_channel=False, channel=0, ratio=10, timeout_periods=40):
+        self.divider = ClockDivider(ratio=ratio)
+        self.controller = ADS8364Controller(channel=channel, six_channel=six_channel, timeout_periods=timeout_periods)
+        members = _pin_members(ADC_PINS)
+        members["o"] = Out(stream.Signature(SampleLayout))
+        members["timeout"] = Out(1)
+        super().__init__(members)
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.divider = divider = self.divider
+        m.submodules.controller = ctrl = self.controller
+        word = ctrl.word
+        m.d.comb += [
+            ctrl.strobe.eq(divider.strobe),
+            ctrl.enable.eq(1),
+            ctrl.eoc.eq(self.adc_eoc_n),
+            ctrl.data.eq(self.adc_data),
+            self.adc_clk.eq(divider.clk_out),
+            self.adc_hold_a_n.eq(word.hold_a),
+            self.adc_hold_b_n.eq(word.hold_b),
+            self.adc_hold_c_n.eq(word.hold_c),
+            self.adc_cs_n.eq(word.cs),
+            self.adc_rd_n.eq(word.rd),
+            self.adc_wr_n.eq(word.wr),
+            self.adc_byte.eq(word.byte),
+            self.adc_add.eq(word.add),
+            self.adc_reset_n.eq(word.reset),
+            self.adc_addr.eq(ctrl.addr),
+            self.timeout.eq(ctrl.timeout),
+        ]
+        wiring.connect(m, wiring.flipped(self.o), ctrl.o)
+        return m
+
+
 class KalmanSystem(wiring.Component):
-    """The whole FPGA design for one ADS8364.
+    """The whole FPGA design for one ADS8364: :class:`AdcFrontend` + Kalman core + output port.
 
     Parameters
     ----------
@@ -65,16 +130,10 @@ class KalmanSystem(wiring.Component):
         self.six_channel = bool(six_channel)
         self.channel = channel
         self.ratio = ratio
-        self.divider = ClockDivider(ratio=ratio)
-        self.controller = ADS8364Controller(channel=channel, six_channel=six_channel, timeout_periods=timeout_periods)
+        self.frontend = AdcFrontend(six_channel=six_channel, channel=channel, ratio=ratio,
+                                    timeout_periods=timeout_periods)
         self.core = make_core(config, variant, channels=6 if six_channel else 1)
-        width = config.formats["x1"].width
-        members = {}
-        for name, (direction, bits, _) in PORTS.items():
-            shape = signed(width) if name == "out_data" else bits
-            init = 1 if name in ("rst_n", "adc_eoc_n") else 0
-            members[name] = In(shape, init=init) if direction == "in" else Out(shape)
-        super().__init__(members)
+        super().__init__(_pin_members(PORTS, config.formats["x1"].width))
 
     def elaborate(self, platform):
         m = Module()
@@ -82,29 +141,15 @@ class KalmanSystem(wiring.Component):
         m.d.comb += ClockSignal("sync").eq(self.clk50)
         m.submodules.reset_sync = ResetSynchronizer(~self.rst_n, domain="sync")
 
-        m.submodules.divider = divider = self.divider
-        m.submodules.controller = ctrl = self.controller
+        m.submodules.frontend = frontend = self.frontend
         m.submodules.core = core = self.core
-
-        word = ctrl.word
-        m.d.comb += [
-            ctrl.strobe.eq(divider.strobe),
-            ctrl.enable.eq(1),
-            ctrl.eoc.eq(self.adc_eoc_n),
-            ctrl.data.eq(self.adc_data),
-            self.adc_clk.eq(divider.clk_out),
-            self.adc_hold_a_n.eq(word.hold_a),
-            self.adc_hold_b_n.eq(word.hold_b),
-            self.adc_hold_c_n.eq(word.hold_c),
-            self.adc_cs_n.eq(word.cs),
-            self.adc_rd_n.eq(word.rd),
-            self.adc_wr_n.eq(word.wr),
-            self.adc_byte.eq(word.byte),
-            self.adc_add.eq(word.add),
-            self.adc_reset_n.eq(word.reset),
-            self.adc_addr.eq(ctrl.addr),
-        ]
-        connect(m, ctrl.o, core.i)
+        for name in ADC_PINS:
+            pin, inner = getattr(self, name), getattr(frontend, name)
+            if PORTS[name][0] == "in":
+                m.d.comb += inner.eq(pin)
+            else:
+                m.d.comb += pin.eq(inner)
+        connect(m, frontend.o, core.i)
         # the output port has no backpressure: each estimate is presented for one cycle
         m.d.comb += [
             core.o.ready.eq(1),
@@ -112,6 +157,6 @@ class KalmanSystem(wiring.Component):
             self.out_data.eq(core.o.payload.x1),
             self.out_channel.eq(core.o.payload.channel),
             self.out_overflow.eq(core.overflow),
-            self.out_timeout.eq(ctrl.timeout),
+            self.out_timeout.eq(frontend.timeout),
         ]
         return m

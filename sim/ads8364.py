@@ -104,6 +104,18 @@ class ADS8364:
             self._fail(t, f"{spec.description} is {measured:.1f} ns, below the minimum {limit:g} ns ({symbol})")
 
     # -- pin events ---------------------------------------------------------------------------
+    def adopt_levels(self, *, clk, hold, reset, cs, rd, wr, addr):
+        """Take the pin levels found when the model is attached to a running design.
+
+        They are not edges: no width or setup is measured from them, only from the next edges.
+        """
+        self._clk, self._hold, self._reset = int(clk), [int(h) for h in hold], int(reset)
+        self._cs, self._rd, self._addr = int(cs), int(rd), int(addr)
+        if not wr:
+            self._fail(0.0, "WR is low: the controller must not write to the ADC")
+        if not (self._cs or self._rd):
+            self._fail(0.0, "attached in the middle of a read")
+
     def clk_edge(self, t, level):
         self.clk_edges += 1
         events = []
@@ -152,7 +164,8 @@ class ADS8364:
             return []
         self._hold[pair] = level
         if level:
-            self._min(t, "tHOLDL", t - self._hold_fall[pair])
+            if self._hold_fall[pair] is not None:
+                self._min(t, "tHOLDL", t - self._hold_fall[pair])
             self._hold_rise[pair] = t
             return []
         self._min(t, "tHOLDH", t - self._hold_rise[pair])
@@ -179,7 +192,8 @@ class ADS8364:
             return []
         self._reset = level
         if level:
-            self._min(t, "tW4", t - self._reset_fall)
+            if self._reset_fall is not None:
+                self._min(t, "tW4", t - self._reset_fall)
             self._reset_rise = t
             return []
         self._reset_fall = t
@@ -214,7 +228,8 @@ class ADS8364:
             return []
         self._rd = level
         if level:
-            self._min(t, "tRDL", t - self._rd_fall)
+            if self._rd_fall is not None:
+                self._min(t, "tRDL", t - self._rd_fall)
             self._rd_rise = t
         else:
             self._rd_fall = t

@@ -8,7 +8,23 @@ from kfpga import scenarios
 from kfpga.csvio import read_samples
 from kfpga.model.reference import KalmanParams
 
-__all__ = ["Source", "scenario_source", "csv_source"]
+__all__ = ["Source", "scenario_source", "csv_source", "stress_codes"]
+
+
+def stress_codes(seed, n):
+    """Codes that exercise a filter's corners: random walk + noise, full-scale steps both ways,
+    a full-scale square wave (its overshoot saturates the innovation), extreme codes at random."""
+    rng = np.random.default_rng(seed)
+    y = np.cumsum(rng.normal(0, 300, n)) + rng.normal(0, 40, n)
+    y = np.clip(np.round(y), -32768, 32767)
+    k = n // 8
+    y[k:k + 30] = 32767
+    y[k + 30:k + 60] = -32768
+    square = np.tile(np.repeat([32767, -32768], 5), 20)
+    y[2 * k:2 * k + len(square)] = square[: max(0, min(len(square), n - 2 * k))]
+    y[rng.integers(0, n, max(n // 50, 1))] = -32768
+    y[rng.integers(0, n, max(n // 50, 1))] = 32767
+    return y.astype(np.int64)
 
 
 class Source:

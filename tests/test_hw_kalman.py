@@ -16,21 +16,9 @@ from kfpga.fixed import QFormat
 from kfpga.hw.kalman import FullKalman, SteadyKalman, make_core
 from kfpga.model.kalman import FixedKalman
 from kfpga.model.reference import KalmanParams
+from kfpga.sim.sources import stress_codes
 
 SEED = 31337
-
-
-def codes(rng, n):
-    """Random walk + noise, full-scale steps both ways, the most negative code, square waves."""
-    y = np.cumsum(rng.normal(0, 300, n)) + rng.normal(0, 40, n)
-    y = np.clip(np.round(y), -32768, 32767)
-    k = n // 8
-    y[k:k + 30] = 32767
-    y[k + 30:k + 60] = -32768
-    y[2 * k:2 * k + 200] = np.tile(np.repeat([32767, -32768], 5), 20)  # overshoot: e saturates
-    y[rng.integers(0, n, n // 50)] = -32768
-    y[rng.integers(0, n, n // 50)] = 32767
-    return y.astype(np.int64)
 
 
 CONFIGS = {
@@ -68,7 +56,7 @@ def test_core_bit_exact_default_10000_samples(variant):
     """>= 10,000 random samples through each core with default formats, backpressure both sides."""
     seed = SEED
     print(f"seed {seed}")
-    y = codes(np.random.default_rng(seed), 10000)
+    y = stress_codes(seed, 10000)
     ovf = check_core(variant, KalmanConfig(), y, 1, seed=seed, p_idle=0.2, p_ready=0.6)
     assert ovf.any(), "the stimulus must exercise saturation"
 
@@ -78,7 +66,7 @@ def test_core_bit_exact_default_10000_samples(variant):
 def test_core_bit_exact_other_formats_and_t(variant, name):
     seed = SEED + 1 + list(CONFIGS).index(name)
     print(f"seed {seed}")
-    y = codes(np.random.default_rng(seed), 2500 if variant == "full" else 4000)
+    y = stress_codes(seed, 2500 if variant == "full" else 4000)
     check_core(variant, CONFIGS[name], y, 1, seed=seed, p_idle=0.3, p_ready=0.5)
 
 
@@ -86,7 +74,7 @@ def test_core_bit_exact_other_formats_and_t(variant, name):
 def test_core_six_channels(variant):
     seed = SEED + 11
     print(f"seed {seed}")
-    y = codes(np.random.default_rng(seed), 3000)
+    y = stress_codes(seed, 3000)
     check_core(variant, KalmanConfig(), y, 6, seed=seed, p_idle=0.1, p_ready=0.7)
 
 

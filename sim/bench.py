@@ -1,0 +1,272 @@
+"""cocotb benches for the generated Verilog: one TB class per kind of DUT.
+
+Each TB owns its clock, reset and bus models. Parameters come from the launcher
+(``sim/runner.py``) as JSON in the ``KFPGA_SIM`` environment variable; results go back as
+JSON to the file it names. Every random source is seeded from those parameters and the seed is
+logged.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+from pathlib import Path
+
+import cocotb
+from cocotb.clock import Clock
+from cocotb.simtime import get_sim_time
+from cocotb.triggers import ClockCycles, Edge, Event, FallingEdge, ReadOnly, RisingEdge, Timer
+
+from kfpga.config import KalmanConfig
+from kfpga.hw.ads8364 import SampleLayout
+from kfpga.hw.kalman import estimate_layout
+from kfpga.sim.ads8364 import ADS8364
+from kfpga.sim.scoreboard import Scoreboard
+from kfpga.sim.sources import csv_source, scenario_source
+from kfpga.sim.streams import StreamSink, StreamSource
+
+__all__ = ["sim_params", "write_results", "AdcPins", "CoreTB", "SystemTB", "FrontendTB", "load_config"]
+
+ENV = "KFPGA_SIM"
+SYS_PERIOD_NS = 20  # 50 MHz
+
+
+def sim_params():
+    return json.loads(os.environ.get(ENV, "{}"))
+
+
+def load_config(params):
+    text = params.get("config_toml")
+    if not text:
+        return KalmanConfig()
+    import tomllib
+
+    return KalmanConfig.from_dict(tomllib.loads(text), source="config")
+
+
+def write_results(params, report):
+    path = params.get("results")
+    if path:
+        Path(path).write_text(json.dumps(report, indent=2, default=str))
+
+
+def now_ns():
+    return get_sim_time("ns")
+
+
+class AdcPins:
+    """The ADS8364 model (``sim/ads8364.py``) wired to the ``adc_*`` pins of a DUT.
+
+    Every pin edge is reported to the model with its time (the model raises on a timing
+    violation, which fails the test); the model's EOC and data events drive the inputs, at once
+    or after a ``Timer``.
+    """
+
+    def __init__(self, dut, adc):
+        self.dut = dut
+        self.adc = adc
+        dut.adc_eoc_n.value = 1
+        dut.adc_data.value = 0
+        self.tasks = []
+
+    def start(self):
+        d, a = self.dut, self.adc
+        watches = [
+            (d.adc_clk, a.clk_edge),
+            (d.adc_hold_a_n, lambda t, v: a.hold_edge(t, 0, v)),
+            (d.adc_hold_b_n, lambda t, v: a.hold_edge(t, 1, v)),
+            (d.adc_hold_c_n, lambda t, v: a.hold_edge(t, 2, v)),
+            (d.adc_reset_n, a.reset_edge),
+            (d.adc_wr_n, a.wr_edge),
+            (d.adc_cs_n, a.cs_edge),
+            (d.adc_rd_n, a.rd_edge),
+            (d.adc_addr, a.addr_change),
+        ]
+        a.adopt_levels(clk=d.adc_clk.value, hold=(d.adc_hold_a_n.value, d.adc_hold_b_n.value, d.adc_hold_c_n.value),
+                       reset=d.adc_reset_n.value, cs=d.adc_cs_n.value, rd=d.adc_rd_n.value, wr=d.adc_wr_n.value,
+                       addr=d.adc_addr.value)
+        for signal, handler in watches:
+            self.tasks.append(cocotb.start_soon(self._watch(signal, handler)))
+
+    async def _watch(self, signal, handler):
+        edge = Edge(signal)
+        while True:
+            await edge
+            self._apply(handler(now_ns(), int(signal.value)))
+
+    def _apply(self, events):
+        for t, name, value in events:
+            delay = t - now_ns()
+            if delay <= 0:
+                self._drive(name, value)
+            else:
+                cocotb.start_soon(self._later(delay, name, value))
+
+    async def _later(self, delay, name, value):
+        await Timer(delay, unit="ns")
+        self._drive(name, value)
+
+    def _drive(self, name, value):
+        if name == "eoc":
+            self.dut.adc_eoc_n.value = value
+        else:  # the bus: a code, or None when nobody drives it (modelled as 0)
+            self.dut.adc_data.value = 0 if value is None else value & 0xFFFF
+
+    def stop(self):
+        for task in self.tasks:
+            task.cancel()
+
+
+def make_source(params, count):
+    """The analog source named by the parameters (a scenario or a CSV replay), seeded."""
+    glitches = {}
+    if params.get("glitch"):
+        # full-scale spikes on the filtered channels at a few conversions
+        rng = random.Random(params["seed"])
+        for k in rng.sample(range(5, max(count, 10)), min(5, max(count - 5, 1))):
+            glitches[k] = (params.get("channel", 0) if not params.get("six") else rng.randrange(6),
+                           rng.choice([32767, -32768]))
+    if params.get("csv"):
+        source = csv_source(params["csv"], clip=params.get("clip", False))
+        source.glitches = glitches
+        return source
+    return scenario_source(params.get("scenario", "sine"), count, params["seed"],
+                           load_config(params).params, glitches=glitches)
+
+
+class CoreTB:
+    """A Kalman core alone: stream source on ``i``, stream sink on ``o``, scoreboard."""
+
+    def __init__(self, dut, params):
+        self.dut = dut
+        self.params = params
+        self.config = load_config(params)
+        self.variant = params["variant"]
+        seed = params["seed"]
+        dut._log.info(f"seed {seed}")
+        self.source = StreamSource(dut, "i", dut.clk, SampleLayout, rng=random.Random(seed),
+                                   p_idle=params.get("p_idle", 0.0))
+        self.sink = StreamSink(dut, "o", dut.clk, estimate_layout(self.config), rng=random.Random(seed + 1),
+                               p_ready=params.get("p_ready", 1.0))
+        self.scoreboard = Scoreboard(self.config, self.variant)
+        Clock(dut.clk, SYS_PERIOD_NS, unit="ns").start()
+
+    async def reset(self):
+        self.dut.rst.value = 1
+        await ClockCycles(self.dut.clk, 3)
+        self.dut.rst.value = 0
+        await RisingEdge(self.dut.clk)
+
+
+class FrontendTB:
+    """Clock divider + ADS8364 controller with the ADC model on its pins."""
+
+    def __init__(self, dut, params, source):
+        self.dut = dut
+        self.adc = ADS8364(source)
+        self.pins = AdcPins(dut, self.adc)
+        self.sink = StreamSink(dut, "o", dut.clk, SampleLayout, rng=random.Random(params["seed"]),
+                               p_ready=params.get("p_ready", 1.0))
+        Clock(dut.clk, SYS_PERIOD_NS, unit="ns").start()
+
+    async def reset(self):
+        self.dut.rst.value = 1
+        await ClockCycles(self.dut.clk, 3)
+        self.dut.rst.value = 0
+
+
+class SystemTB:
+    """The whole design: ADC model on the pins, output-port monitor, scoreboard.
+
+    Every read the ADC model served is an input of the filter; every ``out_valid`` strobe is an
+    output. A reset splits both at its time: estimates in flight at the reset are dropped and
+    the model restarts from x0/P0, as the hardware does.
+    """
+
+    def __init__(self, dut, params, *, expected_conversions):
+        self.dut = dut
+        self.params = params
+        self.config = load_config(params)
+        self.variant = params["variant"]
+        self.six = bool(params.get("six"))
+        dut._log.info(f"seed {params['seed']}")
+        self.source = make_source(params, expected_conversions)
+        self.adc = ADS8364(self.source)
+        self.pins = AdcPins(dut, self.adc)
+        self.outputs = []  # (time_ns, channel, x1, sticky overflow flag)
+        self.resets = []  # times rst_n fell
+        self._want = 0
+        self._enough = Event()
+        self.progress_file = Path(params["results"] + ".progress") if params.get("results") else None
+        dut.rst_n.value = 1
+        Clock(dut.clk50, SYS_PERIOD_NS, unit="ns").start()
+
+    async def reset(self, cycles=4):
+        self.resets.append(now_ns())
+        self.dut.rst_n.value = 0
+        await ClockCycles(self.dut.clk50, cycles)
+        self.dut.rst_n.value = 1
+
+    def start(self):
+        self.pins.start()
+        cocotb.start_soon(self._monitor())
+
+    async def _monitor(self):
+        rising = RisingEdge(self.dut.out_valid)
+        falling = FallingEdge(self.dut.out_valid)
+        step = max(self.params.get("samples", 1) // 100, 1)
+        while True:
+            await rising
+            await ReadOnly()
+            self.outputs.append((now_ns(), int(self.dut.out_channel.value), self.dut.out_data.value.to_signed(),
+                                 int(self.dut.out_overflow.value)))
+            n = len(self.outputs)
+            if self.progress_file and n % step == 0:
+                self.progress_file.write_text(str(n))
+            if n >= self._want:
+                self._enough.set()
+            await falling
+
+    async def wait_outputs(self, count, timeout_us=None):
+        """Run until ``count`` estimates have come out."""
+        self._want = count
+        if len(self.outputs) >= count:
+            return
+        self._enough.clear()
+        await self._enough.wait()
+
+    def report(self, wall_s, *, pending_allowed=2):
+        """Scoreboard over everything so far, plus flags and speed."""
+        sb = Scoreboard(self.config, self.variant)
+        bounds = self.resets + [float("inf")]
+        reads = self.adc.reads
+        outs = self.outputs
+        i = j = 0
+        for k, bound in enumerate(bounds):
+            if k:
+                sb.reset()
+            while i < len(reads) and reads[i][0] < bound:
+                _, addr, code = reads[i]
+                sb.add_input(addr, code)
+                i += 1
+            while j < len(outs) and outs[j][0] < bound:
+                _, ch, x1, sticky = outs[j]
+                sb.add_output(channel=ch, x1=x1, sticky=sticky)
+                j += 1
+        result = sb.check(pending_allowed=pending_allowed)
+        result.update({
+            "samples": result["compared"],
+            "conversions": self.adc.conversions,
+            "eoc_pulses": self.adc.eoc_pulses,
+            "eocs_dropped": self.adc.eocs_dropped,
+            "timeout_flag": int(self.dut.out_timeout.value),
+            "overflow_flag": int(self.dut.out_overflow.value),
+            "resets": len(self.resets),
+            "sim_time_us": now_ns() / 1000.0,
+            "wall_s": wall_s,
+            "samples_per_s": result["compared"] / wall_s if wall_s > 0 else None,
+        })
+        return result
+
+

@@ -1,0 +1,170 @@
+"""Build generated Verilog for Verilator or Icarus and run the cocotb benches on it.
+
+Used by the pytest launcher (``tests/test_cosim.py``) and by ``kfpga simulate``. Builds are
+cached under ``build/sim/<simulator>/<design>-<hash of the Verilog>``; a file lock keeps
+parallel test workers from building the same design at once.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import json
+import os
+import shutil
+import sys
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+from kfpga.config import KalmanConfig
+from kfpga.hw.generate import TOP_NAME, write_block, write_top
+from kfpga.tools import simulator_available, verilator_env
+
+__all__ = ["SIMULATORS", "Built", "build", "run", "SimulationFailed"]
+
+SIMULATORS = ("verilator", "icarus")
+DEFAULT_ROOT = Path("build") / "sim"
+
+
+class SimulationFailed(AssertionError):
+    """A cocotb test failed; the message carries the failures and the log's tail."""
+
+
+@dataclass
+class Built:
+    simulator: str
+    design: str
+    toplevel: str
+    build_dir: Path
+    verilog: Path
+    runner: object
+
+
+def _design_verilog(out_dir, design, config, opts):
+    """Write the Verilog of ``design`` into ``out_dir``; returns ``(path, toplevel)``."""
+    if design == "top":
+        path, _ = write_top(out_dir, config, variant=opts["variant"], six_channel=opts.get("six", False),
+                            channel=opts.get("channel", 0))
+        return path, TOP_NAME
+    if design == "core":
+        path, _ = write_block(out_dir, "core", config, variant=opts["variant"], channels=opts.get("channels", 1))
+    elif design == "divider":
+        path, _ = write_block(out_dir, "divider", ratio=opts.get("ratio", 10))
+    elif design == "frontend":
+        path, _ = write_block(out_dir, "frontend", six_channel=opts.get("six", False), channel=opts.get("channel", 0))
+    else:
+        raise ValueError(f"design must be top, core, divider or frontend, not {design!r}")
+    return path, path.stem
+
+
+@contextlib.contextmanager
+def _locked(path):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def build(simulator, design, *, config=None, root=DEFAULT_ROOT, waves=False, quiet=True, **opts):
+    """Generate ``design``'s Verilog and compile it for ``simulator`` (cached by content)."""
+    from cocotb_tools.runner import VerilatorControlFile, get_runner
+
+    ok, why = simulator_available(simulator)
+    if not ok:
+        raise FileNotFoundError(why)
+    config = KalmanConfig() if config is None else config
+    root = Path(root).resolve()
+    staging = root / "src" / f"{design}-{os.getpid()}"
+    verilog, toplevel = _design_verilog(staging, design, config, opts)
+    digest = hashlib.sha1(verilog.read_bytes() + simulator.encode() + bytes([waves])).hexdigest()[:10]
+    build_dir = root / simulator / f"{design}-{digest}"
+    if simulator == "verilator":
+        os.environ.update(verilator_env())
+    with _locked(root / simulator / f".{design}-{digest}.lock"):
+        src = build_dir / "src"
+        src.mkdir(parents=True, exist_ok=True)
+        for f in staging.iterdir():
+            shutil.copy2(f, src / f.name)
+        shutil.rmtree(staging, ignore_errors=True)
+        verilog = src / verilog.name
+        runner = get_runner(simulator)
+        sources = [verilog]
+        build_args = []
+        if simulator == "verilator":
+            sources.append(VerilatorControlFile(src / "verilator_lint.vlt"))
+            build_args = ["-O3", "--x-assign", "fast", "--x-initial", "fast", "-Wno-fatal"]
+        stamp = build_dir / ".built"
+        log = build_dir / "build.log"
+        if not stamp.exists():
+            runner.build(sources=sources, hdl_toplevel=toplevel, build_dir=build_dir, timescale=("1ns", "1ps"),
+                         build_args=build_args, waves=waves, always=True, log_file=log if quiet else None)
+            stamp.write_text("ok")
+        else:
+            # the runner needs its build state even when the binary is cached
+            runner.build(sources=sources, hdl_toplevel=toplevel, build_dir=build_dir, timescale=("1ns", "1ps"),
+                         build_args=build_args, waves=waves, always=False, log_file=log if quiet else None)
+    return Built(simulator, design, toplevel, build_dir, verilog, runner)
+
+
+def _results_xml(path):
+    tree = ET.parse(path)
+    failures = []
+    total = 0
+    for case in tree.iter("testcase"):
+        total += 1
+        for tag in ("failure", "error"):
+            for node in case.iter(tag):
+                failures.append(f"{case.get('name')}: {node.get('message') or ''}".strip())
+    return total, failures
+
+
+def run(built, test_module, *, params, testcase=None, waves=False, quiet=True, tag=None):
+    """Run cocotb tests of ``kfpga.sim.<test_module>`` on ``built``; returns the bench's results.
+
+    ``params`` reach the bench as JSON (``KFPGA_SIM``); the result dict it writes comes back
+    with ``tests`` (how many ran). Raises :class:`SimulationFailed` when a test fails.
+    """
+    tag = tag or (testcase if isinstance(testcase, str) else test_module)
+    test_dir = built.build_dir / "runs" / f"{tag}-{os.getpid()}"
+    test_dir.mkdir(parents=True, exist_ok=True)
+    results = test_dir / "results.json"
+    results.unlink(missing_ok=True)
+    params = dict(params, results=str(results))
+    log = test_dir / "sim.log"
+    xml = test_dir / "results.xml"
+    env = {"KFPGA_SIM": json.dumps(params), "COCOTB_RESULTS_FILE": str(xml)}
+    if built.simulator == "verilator":
+        env.update({k: v for k, v in verilator_env().items() if k in ("VERILATOR_ROOT", "PATH")})
+    pytest_var = os.environ.pop("PYTEST_CURRENT_TEST", None)  # the runner would sys.exit on failure
+    try:
+        built.runner.test(test_module=f"kfpga.sim.{test_module}", hdl_toplevel=built.toplevel, hdl_toplevel_lang="verilog",
+                          build_dir=built.build_dir, test_dir=test_dir, testcase=testcase, extra_env=env,
+                          results_xml=str(xml), waves=waves, log_file=log if quiet else None)
+    except SystemExit as exc:
+        raise SimulationFailed(f"{built.simulator} exited with {exc.code}\n{_tail(log)}") from None
+    finally:
+        if pytest_var is not None:
+            os.environ["PYTEST_CURRENT_TEST"] = pytest_var
+    total, failures = _results_xml(xml) if xml.exists() else (0, ["no results file"])
+    if failures or total == 0:
+        raise SimulationFailed(f"{built.simulator}/{built.design}: {'; '.join(failures) or 'no test ran'}\n{_tail(log)}")
+    out = json.loads(results.read_text()) if results.exists() else {}
+    out.update({"tests": total, "simulator": built.simulator, "log": str(log), "build_dir": str(built.build_dir)})
+    return out
+
+
+def _tail(path, lines=40):
+    try:
+        text = Path(path).read_text(errors="replace").splitlines()
+    except OSError:
+        return ""
+    return "\n".join(text[-lines:])
+
+
+if __name__ == "__main__":  # pragma: no cover - a manual entry point for debugging a bench
+    print(json.dumps(run(build(sys.argv[1], sys.argv[2], variant="steady"), sys.argv[3], params={"seed": 1}), indent=2))

@@ -1,0 +1,33 @@
+"""cocotb: the clock divider's strobe period and output duty cycle on the generated Verilog."""
+
+import cocotb
+from cocotb.clock import Clock
+from cocotb.simtime import get_sim_time
+from cocotb.triggers import ClockCycles, Edge, RisingEdge
+
+from kfpga.sim.bench import sim_params, write_results
+
+
+@cocotb.test()
+async def divider_ratio_and_duty(dut):
+    p = sim_params()
+    ratio = int(p.get("ratio", 10))
+    Clock(dut.clk, 20, unit="ns").start()
+    dut.rst.value = 0
+    await ClockCycles(dut.clk, 2 * ratio)
+    strobes = []
+    for cycle in range(20 * ratio):
+        await RisingEdge(dut.clk)
+        if dut.strobe.value:
+            strobes.append(cycle)
+    edges = []
+    for _ in range(20):
+        await Edge(dut.clk_out)
+        edges.append((get_sim_time("ns"), int(dut.clk_out.value)))
+    highs = {round(b[0] - a[0]) for a, b in zip(edges, edges[1:], strict=False) if a[1] == 1}
+    lows = {round(b[0] - a[0]) for a, b in zip(edges, edges[1:], strict=False) if a[1] == 0}
+    periods = {b - a for a, b in zip(strobes, strobes[1:], strict=False)}
+    report = {"ratio": ratio, "strobe_periods": sorted(periods), "high_ns": sorted(highs), "low_ns": sorted(lows)}
+    write_results(p, report)
+    assert periods == {ratio}, report
+    assert highs == {20 * (ratio // 2)} and lows == {20 * (ratio - ratio // 2)}, report
