@@ -239,7 +239,7 @@ class SystemTB:
     def report(self, wall_s, *, pending_allowed=2):
         """Scoreboard over everything so far, plus flags and speed."""
         sb = Scoreboard(self.config, self.variant)
-        bounds = self.resets + [float("inf")]
+        bounds = [*self.resets, float("inf")]
         reads = self.adc.reads
         outs = self.outputs
         i = j = 0

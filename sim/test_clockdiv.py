@@ -1,5 +1,7 @@
 """cocotb: the clock divider's strobe period and output duty cycle on the generated Verilog."""
 
+import itertools
+
 import cocotb
 from cocotb.clock import Clock
 from cocotb.simtime import get_sim_time
@@ -24,9 +26,9 @@ async def divider_ratio_and_duty(dut):
     for _ in range(20):
         await Edge(dut.clk_out)
         edges.append((get_sim_time("ns"), int(dut.clk_out.value)))
-    highs = {round(b[0] - a[0]) for a, b in zip(edges, edges[1:], strict=False) if a[1] == 1}
-    lows = {round(b[0] - a[0]) for a, b in zip(edges, edges[1:], strict=False) if a[1] == 0}
-    periods = {b - a for a, b in zip(strobes, strobes[1:], strict=False)}
+    highs = {round(b[0] - a[0]) for a, b in itertools.pairwise(edges) if a[1] == 1}
+    lows = {round(b[0] - a[0]) for a, b in itertools.pairwise(edges) if a[1] == 0}
+    periods = {b - a for a, b in itertools.pairwise(strobes)}
     report = {"ratio": ratio, "strobe_periods": sorted(periods), "high_ns": sorted(highs), "low_ns": sorted(lows)}
     write_results(p, report)
     assert periods == {ratio}, report
