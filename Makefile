@@ -16,19 +16,26 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto --dist loadgroup
 
 demo: $(STAMP)
 	mkdir -p $(BUILD)
 	for v in steady full; do \
-	  $(BIN)/kfpga compare --variant $$v --seed 1 --plot $(BUILD)/compare_$$v.png | tee $(BUILD)/compare_$$v.txt && \
-	  $(BIN)/kfpga compare --variant $$v --seed 1 --json > $(BUILD)/compare_$$v.json || exit 1; \
+	  $(BIN)/kfpga compare --variant $$v --seed 1 --plot $(BUILD)/compare_$$v.png > $(BUILD)/compare_$$v.txt && \
+	  $(BIN)/kfpga compare --variant $$v --seed 1 --json > $(BUILD)/compare_$$v.json && \
+	  cat $(BUILD)/compare_$$v.txt || exit 1; \
 	done
 	for v in steady full; do $(BIN)/kfpga generate --variant $$v --out $(BUILD)/$$v || exit 1; done
-	@echo "fixed-vs-float reports: $(BUILD)/compare_*.txt, .json, .png; Verilog: $(BUILD)/steady, $(BUILD)/full"
+	for v in steady full; do \
+	  $(BIN)/kfpga simulate --variant $$v --samples 2000 --seed 1 --quiet > $(BUILD)/simulate_$$v.txt && \
+	  cat $(BUILD)/simulate_$$v.txt || exit 1; \
+	done
+	@echo "fixed-vs-float reports: $(BUILD)/compare_*.txt, .json, .png; Verilog: $(BUILD)/steady, $(BUILD)/full;"
+	@echo "co-simulation: $(BUILD)/simulate_*.txt"
 
 bench: $(STAMP)
 	$(BIN)/python bench/bench_model.py
+	$(BIN)/python bench/bench_cosim.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -59,12 +59,16 @@ def _select(states, index):
 
 
 def _x2_output(m, d, v):
-    """x2 = v / T: a shift when T = 2**k (here only the binary point moves), else v * (1/T)."""
+    """x2 = v / T: a shift when T = 2**k (here only the binary point moves), else [v]_vt * (1/T)."""
     f = d.config.formats
     if d.inv_t is None:
         return requantize(m, v, d.x2_src_frac, f["x2"], name="x2")
-    product = v * Const(d.inv_t, signed(f["inv_t"].width))
-    return requantize(m, product, d.x2_src_frac, f["x2"], name="x2")
+    vt, f_vt = requantize(m, v, f["v"].frac_bits, f["vt"], name="vt")  # an 18-bit multiplier operand
+    product = vt * Const(d.inv_t, signed(f["inv_t"].width))
+    x2, f_x2 = requantize(m, product, d.x2_src_frac, f["x2"], name="x2")
+    flag = Signal(name="x2_ovf_any")
+    m.d.comb += flag.eq(f_vt | f_x2)
+    return x2, flag
 
 
 def _measurement_update(m, d, y, xl1, v, k1, k2, gain_shape):

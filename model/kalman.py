@@ -28,8 +28,9 @@ s.frac - pl.frac``), saturated to ``gain``'s largest value when it does not fit 
 ``d <= 0``), then given the sign of ``n``: truncation toward zero.
 
 The output ``x2 = v / T`` is ``[v]_x2`` read with the binary point moved by k when ``T = 2**k``
-(a shift), else ``[v * (1/T)]_x2`` with ``1/T`` rounded into ``inv_t``. Any saturation (or
-wrap) sets the sample's overflow flag; the sticky flag is its running OR.
+(a shift), else ``[[v]_vt * (1/T)]_x2`` with ``1/T`` rounded into ``inv_t`` and ``v`` rounded
+into the 18-bit operand ``vt`` first. Any saturation (or wrap) sets the sample's overflow flag;
+the sticky flag is its running OR.
 """
 
 from __future__ import annotations
@@ -78,7 +79,7 @@ class Datapath:
         s(self, "t_shift", k)
         if k is None:
             s(self, "inv_t", to_raw(1.0 / cfg.params.T, f["inv_t"])[0])
-            s(self, "x2_src_frac", f["v"].frac_bits + f["inv_t"].frac_bits)
+            s(self, "x2_src_frac", f["vt"].frac_bits + f["inv_t"].frac_bits)
         else:
             s(self, "inv_t", None)
             s(self, "x2_src_frac", f["v"].frac_bits + k)
@@ -108,6 +109,8 @@ class Datapath:
             "v": rq(self.v_sum[0], "v"),
             "x2": rq(self.x2_src_frac, "x2"),
         }
+        if self.inv_t is not None:
+            out["vt"] = rq(f["v"].frac_bits, "vt")
         if self.variant == "full":
             out["pl"] = rq(f["p"].frac_bits, "pl")
             out["pl22"] = rq(self.pl22_sum[0], "pl")
@@ -244,9 +247,18 @@ class FixedKalman:
         return f["x1"].to_float(result.x1), f["x2"].to_float(result.x2), f["xl1"].to_float(result.yhat)
 
 
+def _x2(q_x2, q_vt, inv_t, v):
+    """x2 = v / T: requantised v, or [v]_vt * (1/T) requantised."""
+    if inv_t is None:
+        return q_x2(v)
+    vt, f1 = q_vt(v)
+    x2, f2 = q_x2(vt * inv_t)
+    return x2, f1 | f2
+
+
 def _steady_kernel(d, rq, ys, st, outs, _divide):
     """Steady-state update for every time step of ``ys`` (ints or batch rows)."""
-    q_xl1, q_e, q_x1, q_v, q_x2 = rq["xl1"], rq["e"], rq["x1"], rq["v"], rq["x2"]
+    q_xl1, q_e, q_x1, q_v, q_x2, q_vt = rq["xl1"], rq["e"], rq["x1"], rq["v"], rq["x2"], rq.get("vt")
     (_, (a_x1, a_v)), (_, (a_y, a_xl)) = d.xl1_sum, d.e_sum
     (_, (b_xl, b_p)), (_, (c_v, c_p)) = d.x1_sum, d.v_sum
     k1, k2, inv_t = d.k1, d.k2, d.inv_t
@@ -257,7 +269,7 @@ def _steady_kernel(d, rq, ys, st, outs, _divide):
         e, f2 = q_e((y << a_y) - (xl1 << a_xl))                # e = y - xl1
         x1, f3 = q_x1((xl1 << b_xl) + ((k1 * e) << b_p))      # x1 = xl1 + K1 e
         v, f4 = q_v((v << c_v) + ((k2 * e) << c_p))           # v = v + T K2 e
-        x2, f5 = q_x2(v if inv_t is None else v * inv_t)       # x2 = v / T
+        x2, f5 = _x2(q_x2, q_vt, inv_t, v)                     # x2 = v / T
         o_x1[n], o_x2[n], o_yhat[n], o_ovf[n] = x1, x2, xl1, f1 | f2 | f3 | f4 | f5
     st.x1, st.v = x1, v
     return st
@@ -265,7 +277,7 @@ def _steady_kernel(d, rq, ys, st, outs, _divide):
 
 def _full_kernel(d, rq, ys, st, outs, divide_fn):
     """Time-varying update for every time step of ``ys`` (ints or batch rows)."""
-    q_xl1, q_e, q_x1, q_v, q_x2 = rq["xl1"], rq["e"], rq["x1"], rq["v"], rq["x2"]
+    q_xl1, q_e, q_x1, q_v, q_x2, q_vt = rq["xl1"], rq["e"], rq["x1"], rq["v"], rq["x2"], rq.get("vt")
     q_pl, q_pl22, q_s, q_p = rq["pl"], rq["pl22"], rq["s"], rq["p"]
     (_, (a_x1, a_v)), (_, (a_y, a_xl)) = d.xl1_sum, d.e_sum
     (_, (b_xl, b_p)), (_, (c_v, c_p)) = d.x1_sum, d.v_sum
@@ -293,7 +305,7 @@ def _full_kernel(d, rq, ys, st, outs, divide_fn):
         p12, f13 = q_p((pl12 << g_pl) - ((k1 * pl12) << g_p))  # p12 = pl12 - K1 pl12
         p21, f14 = q_p((pl21 << g_pl) - ((k2 * pl11) << g_p))  # p21 = pl21 - K2 pl11
         p22, f15 = q_p((pl22 << g_pl) - ((k2 * pl12) << g_p))  # p22 = pl22 - K2 pl12
-        x2, f16 = q_x2(v if inv_t is None else v * inv_t)      # x2 = v / T
+        x2, f16 = _x2(q_x2, q_vt, inv_t, v)                    # x2 = v / T
         flags = f1 | f2 | f3 | f4 | f5 | f6 | f7 | f8 | f9 | f10 | f11 | f12 | f13 | f14 | f15 | f16
         o_x1[n], o_x2[n], o_yhat[n], o_ovf[n] = x1, x2, xl1, flags
     st.x1, st.v, st.p = x1, v, (p11, p12, p21, p22)

@@ -27,10 +27,20 @@ RD is low, RD low width, and WR (the controller must never write).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 from kfpga.ads8364 import TIMING, figure
 
-__all__ = ["TimingViolation", "ADS8364"]
+__all__ = ["TimingViolation", "ADS8364", "Read"]
+
+
+class Read(NamedTuple):
+    """One read of the parallel port: when, which channel, the code, the conversion it came from."""
+
+    time_ns: float
+    channel: int
+    code: int
+    conversion: int
 
 #: Data hold after RD rises (ns): not given in the pages seen; sibling parts hold >= 5 ns.
 DATA_HOLD_NS = 5.0
@@ -53,6 +63,7 @@ class ADS8364:
     def __init__(self, source):
         self.source = source
         self.registers = [0] * 6
+        self._origin = [-1] * 6  # conversion index of each register's code
         self._held = [0] * 6
         self._pairs = set()  # pairs of the conversion in progress
         self._clocks = 0  # CLK rising edges counted by the conversion in progress
@@ -80,7 +91,7 @@ class ADS8364:
         self.conversions = 0
         self.eoc_pulses = 0
         self.eocs_dropped = 0
-        self.reads = []  # (time_ns, address, code)
+        self.reads = []  # Read tuples, in order
         self.clk_edges = 0
 
     # -- test controls ----------------------------------------------------------------------
@@ -149,6 +160,7 @@ class ADS8364:
         for pair in self._pairs:
             for ch in (2 * pair, 2 * pair + 1):
                 self.registers[ch] = self._held[ch]
+                self._origin[ch] = self.conversions - 1
         self._pairs = set()
         self._start = None
         if self._drop:
@@ -198,6 +210,7 @@ class ADS8364:
             return []
         self._reset_fall = t
         self.registers = [0] * 6
+        self._origin = [-1] * 6
         self._pairs = set()
         self._start = None
         events = []
@@ -248,5 +261,5 @@ class ADS8364:
         if self._addr > 5:
             self._fail(t, f"address {self._addr:03b} (cycle/FIFO mode) is not used by this controller")
         code = self.registers[self._addr]
-        self.reads.append((t, self._addr, code))
+        self.reads.append(Read(t, self._addr, code, self._origin[self._addr]))
         return [(t, "data", None), (t + figure("tACC"), "data", code)]

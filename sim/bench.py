@@ -176,6 +176,19 @@ class FrontendTB:
         self.dut.rst.value = 0
 
 
+def _per_channel_float(config, variant, channels, codes):
+    """Float x1 of each sample, each channel filtered on its own from x0, P0."""
+    import numpy as np
+
+    from kfpga.analysis import float_run
+
+    out = np.zeros(len(codes))
+    for ch in np.unique(channels):
+        idx = np.flatnonzero(channels == ch)
+        out[idx] = float_run(config, variant, codes[idx])[0]
+    return out
+
+
 class SystemTB:
     """The whole design: ADC model on the pins, output-port monitor, scoreboard.
 
@@ -236,6 +249,35 @@ class SystemTB:
         self._enough.clear()
         await self._enough.wait()
 
+    def _error_vs_float(self):
+        """The hardware's x1 against the float filter (and the truth) on the same samples."""
+        import numpy as np
+
+        from kfpga.analysis import rmse, sqnr_db
+
+        n = min(len(self.outputs), len(self.adc.reads))
+        if n == 0:
+            return {}
+        reads = self.adc.reads[:n]
+        channels = np.array([r.channel for r in reads])
+        codes = np.array([r.code for r in reads], dtype=np.int64)
+        fmt = self.config.formats["x1"]
+        hw = fmt.to_float([o[2] for o in self.outputs[:n]])
+        flt = _per_channel_float(self.config, self.variant, channels, codes)
+        out = {
+            "max_abs_hw_minus_float": float(np.max(np.abs(hw - flt))),
+            "max_abs_hw_minus_float_lsb": float(np.max(np.abs(hw - flt)) / fmt.lsb),
+            "sqnr_db": sqnr_db(flt, hw),
+        }
+        truth = getattr(self.source, "truth", None)
+        if truth is not None:
+            k = np.array([r.conversion for r in reads]) % truth.shape[1]
+            t = truth[channels, k]
+            settle = min(100, n // 10)
+            out.update({"rmse_raw": rmse(codes[settle:], t[settle:]), "rmse_float": rmse(flt[settle:], t[settle:]),
+                        "rmse_hw": rmse(hw[settle:], t[settle:])})
+        return out
+
     def report(self, wall_s, *, pending_allowed=2):
         """Scoreboard over everything so far, plus flags and speed."""
         sb = Scoreboard(self.config, self.variant)
@@ -246,15 +288,16 @@ class SystemTB:
         for k, bound in enumerate(bounds):
             if k:
                 sb.reset()
-            while i < len(reads) and reads[i][0] < bound:
-                _, addr, code = reads[i]
-                sb.add_input(addr, code)
+            while i < len(reads) and reads[i].time_ns < bound:
+                sb.add_input(reads[i].channel, reads[i].code)
                 i += 1
             while j < len(outs) and outs[j][0] < bound:
                 _, ch, x1, sticky = outs[j]
                 sb.add_output(channel=ch, x1=x1, sticky=sticky)
                 j += 1
         result = sb.check(pending_allowed=pending_allowed)
+        if not self.resets:
+            result.update(self._error_vs_float())
         result.update({
             "samples": result["compared"],
             "conversions": self.adc.conversions,

@@ -14,6 +14,7 @@ import json
 import os
 import shutil
 import sys
+import threading
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -123,11 +124,12 @@ def _results_xml(path):
     return total, failures
 
 
-def run(built, test_module, *, params, testcase=None, waves=False, quiet=True, tag=None):
+def run(built, test_module, *, params, testcase=None, waves=False, quiet=True, tag=None, on_progress=None):
     """Run cocotb tests of ``kfpga.sim.<test_module>`` on ``built``; returns the bench's results.
 
     ``params`` reach the bench as JSON (``KFPGA_SIM``); the result dict it writes comes back
     with ``tests`` (how many ran). Raises :class:`SimulationFailed` when a test fails.
+    ``on_progress(n)`` is called from a watcher thread as the bench reports estimates out.
     """
     tag = tag or (testcase if isinstance(testcase, str) else test_module)
     test_dir = built.build_dir / "runs" / f"{tag}-{os.getpid()}"
@@ -141,6 +143,10 @@ def run(built, test_module, *, params, testcase=None, waves=False, quiet=True, t
     if built.simulator == "verilator":
         env.update({k: v for k, v in verilator_env().items() if k in ("VERILATOR_ROOT", "PATH")})
     pytest_var = os.environ.pop("PYTEST_CURRENT_TEST", None)  # the runner would sys.exit on failure
+    stop = threading.Event()
+    if on_progress:
+        threading.Thread(target=_watch_progress, args=(Path(str(results) + ".progress"), on_progress, stop),
+                         daemon=True).start()
     try:
         built.runner.test(test_module=f"kfpga.sim.{test_module}", hdl_toplevel=built.toplevel, hdl_toplevel_lang="verilog",
                           build_dir=built.build_dir, test_dir=test_dir, testcase=testcase, extra_env=env,
@@ -148,6 +154,7 @@ def run(built, test_module, *, params, testcase=None, waves=False, quiet=True, t
     except SystemExit as exc:
         raise SimulationFailed(f"{built.simulator} exited with {exc.code}\n{_tail(log)}") from None
     finally:
+        stop.set()
         if pytest_var is not None:
             os.environ["PYTEST_CURRENT_TEST"] = pytest_var
     total, failures = _results_xml(xml) if xml.exists() else (0, ["no results file"])
@@ -155,7 +162,21 @@ def run(built, test_module, *, params, testcase=None, waves=False, quiet=True, t
         raise SimulationFailed(f"{built.simulator}/{built.design}: {'; '.join(failures) or 'no test ran'}\n{_tail(log)}")
     out = json.loads(results.read_text()) if results.exists() else {}
     out.update({"tests": total, "simulator": built.simulator, "log": str(log), "build_dir": str(built.build_dir)})
+    if waves:
+        out["waves"] = [str(p) for p in sorted(test_dir.rglob("*")) if p.suffix in (".vcd", ".fst", ".ghw")]
     return out
+
+
+def _watch_progress(path, callback, stop):
+    last = -1
+    while not stop.wait(0.5):
+        try:
+            n = int(path.read_text() or 0)
+        except (OSError, ValueError):
+            continue
+        if n != last:
+            callback(n)
+            last = n
 
 
 def _tail(path, lines=40):

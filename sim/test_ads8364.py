@@ -19,7 +19,7 @@ async def pin_protocol(dut):
     await tb.reset()
     tb.pins.start()
     await with_timeout(tb.sink.run(n), 10_000 * n, "ns")
-    reads = [(addr, code) for _, addr, code in tb.adc.reads]
+    reads = [(r.channel, r.code) for r in tb.adc.reads]
     got = [(w["channel"], w["sample"]) for w in tb.sink.words]
     report = {"samples": len(got), "conversions": tb.adc.conversions, "reads": len(reads),
               "mismatches": sum(a != b for a, b in zip(got, reads, strict=False))}

@@ -67,7 +67,7 @@ def test_control_words_cycle_by_cycle(channel):
     assert set(cycle[20:-2]) <= {19} and cycle[-2:] == [20, 21]
     assert len(set(states)) == 22  # all 22 states visited
     # one output per conversion, the addressed channel, the code the ADC drove
-    assert h.outputs == [(channel, int(np.int16(code))) for _, _, code in h.adc.reads[: len(h.outputs)]]
+    assert h.outputs == [(channel, r.code) for r in h.adc.reads[: len(h.outputs)]]
     assert all(ch == channel for ch, _ in h.outputs)
     assert h.adc.conversions >= len(h.outputs)
 
@@ -111,7 +111,7 @@ def test_eoc_timeout_raises_flag_and_recovers():
     assert h.adc.eocs_dropped == 1
     # the conversion without EOC yields no word; every other conversion yields exactly one
     assert h.adc.conversions == len(h.outputs) + 1 or h.adc.conversions == len(h.outputs) + 2
-    assert h.outputs == [(1, int(np.int16(code))) for _, _, code in h.adc.reads[: len(h.outputs)]]
+    assert h.outputs == [(1, r.code) for r in h.adc.reads[: len(h.outputs)]]
     # a RESET pulse follows the timeout, then conversions go on
     resets = [i for i, (_, w) in enumerate(h.periods) if not (w >> BITS["reset"]) & 1]
     assert len(resets) == 2  # power-on and recovery
@@ -167,7 +167,7 @@ def test_reset_in_every_state_returns_to_idle(state):
 
     h.run(script)
     assert checks == {"state": 0, "word": word(addr=2), "valid": 0}
-    assert h.outputs[-2:] == [(2, int(np.int16(code))) for _, _, code in h.adc.reads[-2:]]
+    assert h.outputs[-2:] == [(2, r.code) for r in h.adc.reads[-2:]]
 
 
 @pytest.mark.parametrize("illegal", range(22, 32))
@@ -198,7 +198,7 @@ def test_backpressure_loses_nothing():
         await wait_outputs(ctx, h, 30)
 
     h.run(script)
-    reads = [(a, int(np.int16(code))) for _, a, code in h.adc.reads]
+    reads = [(r.channel, r.code) for r in h.adc.reads]
     assert h.outputs == reads[: len(h.outputs)]
     assert len(reads) - len(h.outputs) <= 1  # at most the read in flight
 

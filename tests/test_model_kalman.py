@@ -106,7 +106,7 @@ def spec_run(config, variant, y):
         if t_shift is not None and t_shift < 0:
             x2_exact = val["v"](v) * (1 << -t_shift)
         if inv_t is not None:
-            x2_exact = val["v"](v) * inv_t
+            x2_exact = val["vt"](q(val["v"](v), "vt")) * inv_t
         x2 = q(x2_exact, "x2")
         out.append((x1, x2, xl1, any(flags)))
     return [np.array(col) for col in zip(*out, strict=True)]
@@ -137,7 +137,7 @@ def _random_config(rng):
             continue
         i = max(1, fmt.int_bits + int(rng.integers(-3, 2)))
         fb = max(0, fmt.frac_bits + int(rng.integers(-3, 3)))
-        if name in ("e", "gain", "pl", "inv_t"):
+        if name in ("e", "gain", "pl", "inv_t", "vt"):
             fb = min(fb, 18 - i) if i < 18 else 0
             i = min(i, 18)
         formats[name] = QFormat(i, fb, str(rng.choice(["floor", "half_up"])), str(rng.choice(["saturate", "saturate", "wrap"])))
@@ -270,8 +270,13 @@ def test_power_of_two_t_is_a_shift_and_other_t_a_product(variant):
         _, x2_fixed, _ = model.to_float(model.run(y))
         w = slice(100, None)
         # exactness is the spec test's job; here: the rate output, through the shift or the
-        # product by 1/T, estimates the true rate as well as float does (within 1 %)
-        assert rmse(x2_fixed[w], rate[w]) <= 1.01 * rmse(x2_float[w], rate[w]), t
+        # product by 1/T, estimates the true rate as well as float does, up to the rounding of its
+        # own output step q (uniform rounding noise adds q^2/12 to the error variance): for
+        # T = 2**k the x2 LSB, else the 18-bit operand vt's LSB scaled by 1/T
+        f = cfg.formats
+        q = f["x2"].lsb if shift is not None else f["vt"].lsb / t
+        bound = np.sqrt(rmse(x2_float[w], rate[w]) ** 2 + (q**2 + f["x2"].lsb ** 2) / 12)
+        assert rmse(x2_fixed[w], rate[w]) <= 1.01 * bound, t
 
 
 def test_run_rejects_bad_input():

