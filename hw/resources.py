@@ -149,7 +149,7 @@ def longest_path(module, cost):
 
     best, best_bits = 0, []
     sinks = []
-    for name, cell in cells.items():
+    for cell in cells.values():
         if _is_ff(cell["type"]):
             for port, direction in cell.get("port_directions", {}).items():
                 if direction == "input":

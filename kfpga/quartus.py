@@ -153,7 +153,7 @@ def write_project(out_dir, config, *, variant, six_channel=False, channel=0, rat
     (out_dir / f"{TOP_NAME}.sdc").write_text(sdc)
 
     pin_lines = []
-    for (port, bit), row in sorted(assigned.items(), key=lambda kv: (list(PORTS).index(kv[0][0]), kv[0][1] or 0)):
+    for _, row in sorted(assigned.items(), key=lambda kv: (list(PORTS).index(kv[0][0]), kv[0][1] or 0)):
         pin_lines.append(f"set_location_assignment {row.pin} -to {row.target}")
         pin_lines.append(f'set_instance_assignment -name IO_STANDARD "{row.io_standard}" -to {row.target}')
     qsf = Template(_constraint_file("kfpga_top.qsf.in").read_text()).substitute(
