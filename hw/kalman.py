@@ -45,17 +45,22 @@ def _state_array(channels, shape, init, name):
 
 
 def _select(states, index):
-    """``states[index]`` as a chain of ``Mux`` (Verilog ``assign``), not a case statement.
+    """``states[index]`` as a balanced tree of ``Mux`` on the index bits (Verilog ``assign``).
 
-    An ``Array`` read becomes an ``always @*`` case block, which an event-driven simulator
-    (Icarus) leaves undefined until one of its inputs changes: with channel 0 first and the
-    state still at its power-up value, that never happens. A mux chain is a continuous
-    assignment and is defined from time zero. An index outside the array reads zero.
+    Not an ``Array`` read: that becomes an ``always @*`` case block, which an event-driven
+    simulator (Icarus) leaves undefined until one of its inputs changes; with channel 0 first
+    and the state still at its power-up value, that never happens. A mux tree is a continuous
+    assignment, defined from time zero, and its depth grows with log2 of the channel count
+    (it sits in the steady-state core's one-cycle loop). An index outside the array reads zero.
     """
-    value = Const(0, states[0].shape())
-    for k in reversed(range(len(states))):
-        value = Mux(index == k, states[k], value)
-    return value
+    level = list(states)
+    while len(level) & (len(level) - 1):
+        level.append(Const(0, states[0].shape()))
+    bit = 0
+    while len(level) > 1:
+        level = [Mux(index[bit], level[k + 1], level[k]) for k in range(0, len(level), 2)]
+        bit += 1
+    return level[0]
 
 
 def _x2_output(m, d, v):

