@@ -5,6 +5,7 @@ Each test builds (once per content hash, under build/sim) and runs one cocotb be
 (``CI=true``), where both must run.
 """
 
+import json
 import os
 
 import pytest
@@ -106,3 +107,17 @@ def test_system_robustness(simulator, variant, case):
     result = run(build(simulator, "top", variant=variant, channel=1), "test_top", testcase=case,
                  params={"variant": variant, "seed": SEED, "channel": 1}, tag=case)
     check(result)
+
+
+@pytest.mark.parametrize("variant", ["steady", "full"])
+def test_simulate_command_json(variant, capsys):
+    """`kfpga simulate --json` on both variants: one JSON object, mismatches 0, exit code 0."""
+    need("verilator")
+    from kfpga.cli import main
+
+    code = main(["simulate", "--variant", variant, "--samples", "300", "--seed", str(SEED), "--json", "--quiet"])
+    out = capsys.readouterr().out
+    result = json.loads(out)
+    assert code == 0
+    assert {"samples", "mismatches", "simulator", "variant", "seed", "wall_s"} <= set(result)
+    assert (result["mismatches"], result["samples"], result["variant"], result["seed"]) == (0, 300, variant, SEED)

@@ -13,6 +13,12 @@ from kfpga.sim.sources import Source, scenario_source
 
 SEED = 8364
 
+
+@pytest.fixture(autouse=True)
+def _print_seed():
+    print(f"seed {SEED} (ADC sources, ready patterns)")
+
+
 # The documented 16-bit control word layout (hw/ads8364.py), written out independently here.
 BITS = {"hold_a": 0, "hold_b": 1, "hold_c": 2, "addr": 3, "cs": 6, "rd": 7, "wr": 8, "byte": 9,
         "add": 10, "reset": 11, "start": 12, "wait_eoc": 13, "latch": 14, "last": 15}
