@@ -20,7 +20,7 @@ import numpy as np
 
 from kfpga.fixed import INT64_SAFE_BITS, QFormat, Rounding, bits_for
 from kfpga.model.ranges import analyse_ranges
-from kfpga.model.reference import KalmanParams
+from kfpga.model.reference import KalmanParams, steady_state_gain
 
 __all__ = ["ConfigError", "Point", "POINTS", "VARIANTS", "INPUT_FORMAT", "KalmanConfig", "default_formats"]
 
@@ -172,8 +172,6 @@ class KalmanConfig:
     @property
     def steady_gain(self):
         """Float ``(K1, T*K2)`` of the steady-state filter, in datapath units."""
-        from kfpga.model.reference import steady_state_gain
-
         (k1, k2), _ = steady_state_gain(self.params.T, self.params.Q, self.params.R)
         return k1, k2 * self.params.T
 

@@ -11,13 +11,16 @@ from __future__ import annotations
 import json
 import os
 import random
+import tomllib
 from pathlib import Path
 
 import cocotb
+import numpy as np
 from cocotb.clock import Clock
 from cocotb.simtime import get_sim_time
 from cocotb.triggers import ClockCycles, Edge, Event, FallingEdge, ReadOnly, RisingEdge, Timer
 
+from kfpga.analysis import float_run, rmse, sqnr_db
 from kfpga.config import KalmanConfig
 from kfpga.hw.ads8364 import SampleLayout
 from kfpga.hw.kalman import estimate_layout
@@ -40,8 +43,6 @@ def load_config(params):
     text = params.get("config_toml")
     if not text:
         return KalmanConfig()
-    import tomllib
-
     return KalmanConfig.from_dict(tomllib.loads(text), source="config")
 
 
@@ -178,10 +179,6 @@ class FrontendTB:
 
 def _per_channel_float(config, variant, channels, codes):
     """Float x1 of each sample, each channel filtered on its own from x0, P0."""
-    import numpy as np
-
-    from kfpga.analysis import float_run
-
     out = np.zeros(len(codes))
     for ch in np.unique(channels):
         idx = np.flatnonzero(channels == ch)
@@ -241,7 +238,7 @@ class SystemTB:
                 self._enough.set()
             await falling
 
-    async def wait_outputs(self, count, timeout_us=None):
+    async def wait_outputs(self, count):
         """Run until ``count`` estimates have come out."""
         self._want = count
         if len(self.outputs) >= count:
@@ -251,10 +248,6 @@ class SystemTB:
 
     def _error_vs_float(self):
         """The hardware's x1 against the float filter (and the truth) on the same samples."""
-        import numpy as np
-
-        from kfpga.analysis import rmse, sqnr_db
-
         n = min(len(self.outputs), len(self.adc.reads))
         if n == 0:
             return {}
