@@ -14,6 +14,7 @@ import json
 import os
 import shutil
 import threading
+import time
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -141,6 +142,7 @@ def run(built, test_module, *, params, testcase=None, waves=False, quiet=True, t
     env = {"KFPGA_SIM": json.dumps(params), "COCOTB_RESULTS_FILE": str(xml)}
     if built.simulator == "verilator":
         env.update({k: v for k, v in verilator_env().items() if k in ("VERILATOR_ROOT", "PATH")})
+    started = time.time()
     pytest_var = os.environ.pop("PYTEST_CURRENT_TEST", None)  # the runner would sys.exit on failure
     stop = threading.Event()
     if on_progress:
@@ -162,7 +164,9 @@ def run(built, test_module, *, params, testcase=None, waves=False, quiet=True, t
     out = json.loads(results.read_text()) if results.exists() else {}
     out.update({"tests": total, "simulator": built.simulator, "log": str(log), "build_dir": str(built.build_dir)})
     if waves:
-        out["waves"] = [str(p) for p in sorted(test_dir.rglob("*")) if p.suffix in (".vcd", ".fst", ".ghw")]
+        # Verilator dumps into the run folder, Icarus next to its build: keep what this run wrote
+        found = list(test_dir.rglob("*")) + list(built.build_dir.glob("*"))
+        out["waves"] = sorted(str(p) for p in found if p.suffix in (".vcd", ".fst") and p.stat().st_mtime >= started)
     return out
 
 

@@ -121,3 +121,22 @@ def test_simulate_command_json(variant, capsys):
     assert code == 0
     assert {"samples", "mismatches", "simulator", "variant", "seed", "wall_s"} <= set(result)
     assert (result["mismatches"], result["samples"], result["variant"], result["seed"]) == (0, 300, variant, SEED)
+
+
+def test_simulate_waves(simulator, capsys, monkeypatch, tmp_path):
+    """--waves leaves a waveform under build/waves (VCD from Verilator, FST from Icarus)."""
+    from kfpga.cli import main
+
+    monkeypatch.chdir(tmp_path)  # build/ of this test, not of the checkout
+    code = main(["simulate", "--simulator", simulator, "--samples", "20", "--seed", "5", "--waves", "--json",
+                 "--quiet"])
+    result = json.loads(capsys.readouterr().out)
+    assert code == 0 and result["mismatches"] == 0
+    assert len(result["waves"]) == 1
+    wave = tmp_path / result["waves"][0]
+    assert wave.parent == tmp_path / "build" / "waves"
+    if wave.suffix == ".vcd":  # text: it must describe this design's pins
+        head = wave.read_text(errors="replace")[:200000]
+        assert "$enddefinitions" in head and "adc_rd_n" in head
+    else:  # FST is compressed binary
+        assert wave.suffix == ".fst" and wave.stat().st_size > 1000
