@@ -76,6 +76,19 @@ def _x2_output(m, d, v):
     return x2, flag
 
 
+def _write_estimate(m, core, channel, x1, x2, yhat, overflowed):
+    """Register the estimate word on ``core.o`` and raise the sticky flag on an overflow."""
+    m.d.sync += [
+        core.o.payload.channel.eq(channel),
+        core.o.payload.x1.eq(x1),
+        core.o.payload.x2.eq(x2),
+        core.o.payload.yhat.eq(yhat),
+        core.o.payload.overflow.eq(overflowed),
+    ]
+    with m.If(overflowed):
+        m.d.sync += core.overflow.eq(1)
+
+
 def _measurement_update(m, d, y, xl1, v, k1, k2, gain_shape):
     """e, then x1 = xl1 + K1 e and v = v + K2 e; returns ``(e, x1, v, flags)``."""
     f = d.config.formats
@@ -166,17 +179,8 @@ class SteadyKalman(wiring.Component):
         with m.If(advance):
             m.d.sync += self.o.valid.eq(a_valid)
             with m.If(a_valid):
-                m.d.sync += [
-                    x1s[index].eq(x1n),
-                    vs[index].eq(vn),
-                    self.o.payload.channel.eq(a_channel),
-                    self.o.payload.x1.eq(x1n),
-                    self.o.payload.x2.eq(x2),
-                    self.o.payload.yhat.eq(xl1),
-                    self.o.payload.overflow.eq(overflowed),
-                ]
-                with m.If(overflowed):
-                    m.d.sync += self.overflow.eq(1)
+                m.d.sync += [x1s[index].eq(x1n), vs[index].eq(vn)]
+                _write_estimate(m, self, a_channel, x1n, x2, xl1, overflowed)
         return m
 
 
@@ -354,14 +358,8 @@ class FullKalman(wiring.Component):
                         ps[0][windex].eq(p11_n), ps[1][windex].eq(p12_n),
                         ps[2][windex].eq(p21_n), ps[3][windex].eq(p22_n),
                         self.o.valid.eq(1),
-                        self.o.payload.channel.eq(channel),
-                        self.o.payload.x1.eq(x1_n),
-                        self.o.payload.x2.eq(x2_n),
-                        self.o.payload.yhat.eq(xl1),
-                        self.o.payload.overflow.eq(wb_flags),
                     ]
-                    with m.If(wb_flags):
-                        m.d.sync += self.overflow.eq(1)
+                    _write_estimate(m, self, channel, x1_n, x2_n, xl1, wb_flags)
                     m.next = "IDLE"
         # plain assignments (Verilog `assign`), not case-statement outputs: no simulator can
         # leave them undefined at time zero while the state has not changed yet
