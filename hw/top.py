@@ -1,15 +1,14 @@
-"""Top level: clock divider + ADS8364 controller + Kalman core + output port."""
+"""Top level: clock divider + ADS8364 controller + a registered filter's core + output port."""
 
 from amaranth import ClockDomain, ClockSignal, Module, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.cdc import ResetSynchronizer
-from amaranth.lib.wiring import In, Out, connect
+from amaranth.lib.wiring import In, Out
 
 from kfpga.hw.ads8364 import ADS8364Controller, SampleLayout
 from kfpga.hw.clockdiv import ClockDivider
-from kfpga.hw.kalman import make_core
 
-__all__ = ["KalmanSystem", "AdcFrontend", "PORTS", "ADC_PINS"]
+__all__ = ["FilterSystem", "AdcFrontend", "PORTS", "ADC_PINS", "out_field"]
 
 #: Top-level ports: name -> (direction, width, description). The pin table and the .sdc use it.
 PORTS = {
@@ -28,7 +27,7 @@ PORTS = {
     "adc_reset_n": ("out", 1, "ADS8364 RESET"),
     "adc_addr": ("out", 3, "ADS8364 A2..A0 (adc_addr[0] = A0)"),
     "adc_data": ("in", 16, "ADS8364 D15..D0"),
-    "out_data": ("out", None, "filtered value x1, two's complement in the x1 format"),
+    "out_data": ("out", None, "the chosen output field (default x1), two's complement in its format"),
     "out_channel": ("out", 3, "channel of out_data (0..5 = A0..C1)"),
     "out_valid": ("out", 1, "one-cycle strobe: out_data and out_channel are new"),
     "out_overflow": ("out", 1, "sticky: a saturation happened in the filter"),
@@ -55,7 +54,7 @@ class AdcFrontend(wiring.Component):
     Parameters
     ----------
     six_channel, channel, ratio, timeout_periods:
-        As :class:`KalmanSystem`.
+        As :class:`FilterSystem`.
 
     Members
     -------
@@ -101,15 +100,31 @@ class AdcFrontend(wiring.Component):
         return m
 
 
-class KalmanSystem(wiring.Component):
-    """The whole FPGA design for one ADS8364: :class:`AdcFrontend` + Kalman core + output port.
+def out_field(config, name=None):
+    """The output field that drives ``out_data`` (default: the filter's), checked."""
+    spec = config.spec
+    name = spec.default_output if name is None else name
+    if name not in spec.output_names:
+        raise ValueError(f"out_field must be one of {', '.join(spec.output_names)} for the {spec.name} filter, "
+                         f"not {name!r}")
+    return name
+
+
+def out_width(config, name=None):
+    """Bits of ``out_data``: the width of the chosen field's format."""
+    spec = config.spec
+    return config.formats[spec.output(out_field(config, name)).point].width
+
+
+class FilterSystem(wiring.Component):
+    """The whole FPGA design for one ADS8364: :class:`AdcFrontend` + a filter core + output port.
 
     Parameters
     ----------
     config:
-        Shared :class:`~kfpga.config.KalmanConfig`.
+        Shared :class:`~kfpga.config.FilterConfig`: the filter and its formats.
     variant:
-        ``"steady"`` or ``"full"``: which Kalman core.
+        Which of the filter's cores (default: its first variant).
     six_channel:
         Sample and filter all six channels (one HOLD for all); else only ``channel``.
     channel:
@@ -118,22 +133,30 @@ class KalmanSystem(wiring.Component):
         System clock / ADC clock (10: 50 MHz -> 5 MHz).
     timeout_periods:
         EOC timeout in ADC CLK periods.
+    out_field:
+        The output field on ``out_data`` (default: the filter's, ``x1`` for the paper's).
 
     Members
     -------
-    See :data:`PORTS`; ``out_data`` is as wide as the x1 format.
+    See :data:`PORTS`; ``out_data`` is as wide as the chosen field's format.
     """
 
-    def __init__(self, config, *, variant="steady", six_channel=False, channel=0, ratio=10, timeout_periods=40):
+    def __init__(self, config, *, variant=None, six_channel=False, channel=0, ratio=10, timeout_periods=40,
+                 out_field=None):
+        spec = config.spec
+        if len(spec.inputs) != 1:
+            raise ValueError(f"the {spec.name} filter takes {len(spec.inputs)} samples per update; the board top "
+                             "feeds one ADC channel per update")
         self.config = config
-        self.variant = variant
+        self.variant = spec.default_variant if variant is None else variant
         self.six_channel = bool(six_channel)
         self.channel = channel
         self.ratio = ratio
+        self.out_field = globals()["out_field"](config, out_field)
         self.frontend = AdcFrontend(six_channel=six_channel, channel=channel, ratio=ratio,
                                     timeout_periods=timeout_periods)
-        self.core = make_core(config, variant, channels=6 if six_channel else 1)
-        super().__init__(_pin_members(PORTS, config.formats["x1"].width))
+        self.core = spec.make_core(config, self.variant, channels=6 if six_channel else 1)
+        super().__init__(_pin_members(PORTS, out_width(config, self.out_field)))
 
     def elaborate(self, platform):
         m = Module()
@@ -149,13 +172,21 @@ class KalmanSystem(wiring.Component):
                 m.d.comb += inner.eq(pin)
             else:
                 m.d.comb += pin.eq(inner)
-        connect(m, frontend.o, core.i)
+        # the controller's (ADC channel, sample) words feed the core's (channel state, y) input
+        sample_name = self.config.spec.inputs[0][0]
+        m.d.comb += [
+            core.i.valid.eq(frontend.o.valid),
+            frontend.o.ready.eq(core.i.ready),
+            getattr(core.i.payload, sample_name).eq(frontend.o.payload.sample),
+        ]
+        if self.six_channel:  # the ADC's channel number is the core's channel state
+            m.d.comb += core.i.payload.channel.eq(frontend.o.payload.channel)
         # the output port has no backpressure: each estimate is presented for one cycle
         m.d.comb += [
             core.o.ready.eq(1),
             self.out_valid.eq(core.o.valid),
-            self.out_data.eq(core.o.payload.x1),
-            self.out_channel.eq(core.o.payload.channel),
+            self.out_data.eq(getattr(core.o.payload, self.out_field)),
+            self.out_channel.eq(core.o.payload.channel if self.six_channel else self.channel),
             self.out_overflow.eq(core.overflow),
             self.out_timeout.eq(frontend.timeout),
         ]

@@ -16,7 +16,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["Timing", "TIMING", "CHANNELS", "ADDRESS_CYCLE_MODE", "ADDRESS_FIFO_MODE", "hold_pair", "figure"]
+from kfpga.fixed import QFormat
+
+__all__ = ["Timing", "TIMING", "CHANNELS", "ADDRESS_CYCLE_MODE", "ADDRESS_FIFO_MODE", "CODE_FORMAT", "CODE_MIN",
+           "CODE_MAX", "hold_pair", "figure"]
 
 #: Channel names in address order: A2..A0 = 000..101 select them directly (SBAS219C, Getting data).
 CHANNELS = ("A0", "A1", "B0", "B1", "C0", "C1")
@@ -75,6 +78,10 @@ TIMING = {
 #: Output coding: 16-bit binary two's complement (seeds/001 4.2.1: "the MSB is the sign bit";
 #: the sibling ADS8361's table, SBAS230E, lists 7FFFh..8000h for +FS..-FS).
 OUTPUT_CODING = "twos_complement"
+#: One conversion result as a fixed-point value: a signed 16-bit integer code.
+CODE_FORMAT = QFormat(16, 0)
+#: The code range, -32768..32767.
+CODE_MIN, CODE_MAX = CODE_FORMAT.min_raw, CODE_FORMAT.max_raw
 
 
 def figure(symbol, clk_period_ns=200.0):

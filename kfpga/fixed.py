@@ -6,13 +6,13 @@ A value in format ``Q(i, f)`` is a signed two's-complement integer ``raw`` of ``
 Every quantisation point of the datapath is a :class:`QFormat`: the format plus the rounding
 rule used when fraction bits are dropped and the overflow rule used when the result does not
 fit. :func:`requantize` applies both to exact integers; ``hw/arith.py`` builds the same
-operation in Amaranth, so the model and the RTL produce identical integers.
+operation in Amaranth and ``kfpga/compiled.py`` writes it into the model's compiled loops, so
+the model and the RTL produce identical integers.
 
-The functions accept Python ``int`` (arbitrary precision; used for the fast single-channel
-path) or numpy ``int64`` arrays (the batch path). They are written with shifts and compares
-instead of ``np.round`` (ties to even) or fxpmath (2000x slower in a sample loop) so that the
-rounding is exactly the hardware's: ``floor`` is an arithmetic right shift, ``half_up`` adds
-half an LSB first.
+The functions accept Python ``int`` (arbitrary precision) or numpy ``int64`` arrays. They are
+written with shifts and compares instead of ``np.round`` (ties to even) or fxpmath (2000x
+slower in a sample loop) so that the rounding is exactly the hardware's: ``floor`` is an
+arithmetic right shift, ``half_up`` adds half an LSB first.
 """
 
 from __future__ import annotations
@@ -196,70 +196,3 @@ def to_raw(value, fmt):
     raws = np.array([r for r, _ in out], dtype=np.int64).reshape(np.shape(value))
     flags = np.array([f for _, f in out], dtype=bool).reshape(np.shape(value))
     return raws, flags
-
-
-def make_requantizer(src_frac, fmt, *, vector):
-    """Return ``f(raw) -> (raw_out, overflowed)`` equal to ``requantize(raw, src_frac, fmt)``.
-
-    The closure has its shift, rounding constant and bounds bound in advance: the model's
-    sample loops call it several times per sample, where :func:`requantize`'s dispatch would
-    dominate the run time. ``vector`` selects the numpy (batch) or the Python-int version.
-    """
-    shift = src_frac - fmt.frac_bits
-    half = (1 << (shift - 1)) if (shift > 0 and fmt.rounding is Rounding.HALF_UP) else 0
-    lo, hi = fmt.min_raw, fmt.max_raw
-    mask = (1 << fmt.width) - 1
-    saturate = fmt.overflow is Overflow.SATURATE
-    left = -shift if shift < 0 else 0
-    right = shift if shift > 0 else 0
-
-    if vector:
-        # specialised at creation: a shift of 0 or an add of 0 would still cost a full array pass
-        def rescale(raw):
-            value = raw + half if half else raw
-            if right:
-                value = value >> right
-            if left:
-                value = value << left
-            return value
-
-        if saturate:
-            def requantize_array(raw):
-                value = rescale(raw)
-                clipped = np.clip(value, lo, hi)
-                return clipped, clipped != value
-        else:
-            def requantize_array(raw):
-                value = rescale(raw)
-                wrapped = ((value - lo) & mask) + lo
-                return wrapped, wrapped != value
-        return requantize_array
-
-    # the int closure is specialised too: it runs several times per sample of a Python loop
-    if right and half:
-        def rescale_int(raw):
-            return (raw + half) >> right
-    elif right:
-        def rescale_int(raw):
-            return raw >> right
-    elif left:
-        def rescale_int(raw):
-            return raw << left
-    else:
-        rescale_int = None
-
-    if rescale_int is None and saturate:
-        def requantize_int(raw):
-            if lo <= raw <= hi:
-                return raw, False
-            return (hi if raw > hi else lo), True
-        return requantize_int
-
-    def requantize_int(raw):
-        value = rescale_int(raw) if rescale_int is not None else raw
-        if lo <= value <= hi:
-            return value, False
-        if saturate:
-            return (hi if value > hi else lo), True
-        return ((value - lo) & mask) + lo, True
-    return requantize_int

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import importlib.metadata
 import importlib.resources
 import json
@@ -13,8 +14,11 @@ from string import Template
 
 from kfpga import __version__
 from kfpga.ads8364 import CHANNELS, figure
+from kfpga.board import SYSTEM_MHZ, SYSTEM_PERIOD_NS
+from kfpga.errors import PinError
 from kfpga.hw.generate import TOP_NAME, write_top
-from kfpga.hw.top import PORTS
+from kfpga.hw.top import PORTS, out_width
+from kfpga.hw.top import out_field as top_out_field
 
 __all__ = ["FAMILY", "DEVICE", "DEVICE_ORDERING", "PinError", "PinRow", "load_pins", "port_bits", "check_pins",
            "write_project"]
@@ -22,17 +26,12 @@ __all__ = ["FAMILY", "DEVICE", "DEVICE_ORDERING", "PinError", "PinRow", "load_pi
 FAMILY = "Cyclone II"
 DEVICE = "EP2C20Q240C8"  # Quartus's name for the ordering code below
 DEVICE_ORDERING = "EP2C20Q240C8N"
-SYSTEM_MHZ = 50.0
 #: The skew bound for control outputs: half a system cycle (see the .sdc).
 TCO_FRACTION = 0.5
 BOARD_NS = 2.0
 #: The assumed receiver of the filtered output bus (edit in the .sdc for a real one).
 OUT_SETUP_NS, OUT_HOLD_NS = 5.0, 0.0
 _PIN = re.compile(r"^PIN_[A-Z]*\d+$")
-
-
-class PinError(ValueError):
-    """The pin table does not fit the design; the message names the row or the port bit."""
 
 
 @dataclass(frozen=True)
@@ -85,18 +84,21 @@ def load_pins(path=None):
     return rows
 
 
-def port_bits(config):
-    """Every top-level port bit as ``(port, bit)`` (``bit`` None for 1-bit ports)."""
+def port_bits(config, out_field=None):
+    """Every top-level port bit as ``(port, bit)`` (``bit`` None for 1-bit ports).
+
+    ``out_data`` is as wide as the format of the output field on it (``out_field``).
+    """
     bits = []
     for name, (_, width, _) in PORTS.items():
-        width = config.formats["x1"].width if name == "out_data" else width
+        width = out_width(config, out_field) if name == "out_data" else width
         bits += [(name, None)] if width == 1 else [(name, b) for b in range(width)]
     return bits
 
 
-def check_pins(rows, config, label="pin table"):
+def check_pins(rows, config, label="pin table", out_field=None):
     """Map each port bit to its row; every bit exactly one pin, every pin used once."""
-    wanted = set(port_bits(config))
+    wanted = set(port_bits(config, out_field))
     by_bit, by_pin = {}, {}
     for row in rows:
         key = (row.port, row.bit)
@@ -107,7 +109,7 @@ def check_pins(rows, config, label="pin table"):
         if row.pin in by_pin:
             raise PinError(f"{label}: line {row.line}: {row.pin} is already used by {by_pin[row.pin].target}")
         by_bit[key], by_pin[row.pin] = row, row
-    missing = [f"{p}[{b}]" if b is not None else p for p, b in port_bits(config) if (p, b) not in by_bit]
+    missing = [f"{p}[{b}]" if b is not None else p for p, b in port_bits(config, out_field) if (p, b) not in by_bit]
     if missing:
         raise PinError(f"{label}: no pin for {', '.join(missing[:8])}{' ...' if len(missing) > 8 else ''} "
                        f"({len(missing)} port bit(s)); add rows for them")
@@ -115,7 +117,7 @@ def check_pins(rows, config, label="pin table"):
 
 
 def _sdc_values(ratio):
-    sys_period = 1000.0 / SYSTEM_MHZ
+    sys_period = SYSTEM_PERIOD_NS
     adc_period = sys_period * ratio
     if adc_period < figure("tC1") - 1e-9:
         raise PinError(f"--ratio {ratio} makes the ADC clock {1000 / adc_period:.3g} MHz; the ADS8364 allows "
@@ -132,20 +134,24 @@ def _sdc_values(ratio):
     }
 
 
-def write_project(out_dir, config, *, variant, six_channel=False, channel=0, ratio=10, pins=None):
+def write_project(out_dir, config, *, variant=None, six_channel=False, channel=0, ratio=10, pins=None, out_field=None):
     """Write the Verilog and a complete Quartus II project into ``out_dir``; returns the manifest."""
     out_dir = Path(out_dir)
+    variant = config.spec.default_variant if variant is None else variant
+    out_field = top_out_field(config, out_field)
     rows = load_pins(pins)
     label = "constraints/pins.csv" if pins is None else str(pins)
-    assigned = check_pins(rows, config, label)
+    assigned = check_pins(rows, config, label, out_field)
     values = _sdc_values(ratio)
-    verilog, top = write_top(out_dir, config, variant=variant, six_channel=six_channel, channel=channel, ratio=ratio)
+    verilog, top = write_top(out_dir, config, variant=variant, six_channel=six_channel, channel=channel, ratio=ratio,
+                             out_field=out_field)
+    data_bits = out_width(config, out_field)
 
     control = [n for n in PORTS if n.startswith("adc_") and PORTS[n][0] == "out" and n != "adc_clk"]
     outputs = [n for n in PORTS if n.startswith("out_")]
 
     def port_list(names):
-        return " ".join(f"{n}[*]" if (PORTS[n][1] or config.formats["x1"].width) != 1 else n for n in names)
+        return " ".join(f"{n}[*]" if (PORTS[n][1] or data_bits) != 1 else n for n in names)
 
     sdc = Template(_constraint_file("kfpga_top.sdc.in").read_text()).substitute(
         top=TOP_NAME, version=__version__, control_ports=port_list(control), output_ports=port_list(outputs),
@@ -167,36 +173,45 @@ def write_project(out_dir, config, *, variant, six_channel=False, channel=0, rat
     manifest = {
         "generator": {"kfpga": __version__, "amaranth": importlib.metadata.version("amaranth")},
         "top": TOP_NAME, "family": FAMILY, "device": DEVICE, "device_ordering_code": DEVICE_ORDERING,
-        "variant": variant, "channels": 6 if six_channel else 1,
+        "filter": config.filter, "variant": variant, "channels": 6 if six_channel else 1,
         "channel": None if six_channel else CHANNELS[channel],
+        "out_data": {"field": out_field, "format": str(config.formats[config.spec.output(out_field).point]),
+                     "width": data_bits},
         "clocks": {"system_mhz": SYSTEM_MHZ, "adc_mhz": float(values["adc_mhz"]), "ratio": ratio},
-        "model": {"T": config.params.T, "Q": config.params.Q, "R": config.params.R,
-                  "P0": [list(r) for r in config.params.P0], "x0": list(config.params.x0)},
+        "model": _jsonable(dataclasses.asdict(config.params)),
         "formats": {name: {"format": str(f), "width": f.width, "rounding": f.rounding.value,
                            "overflow": f.overflow.value} for name, f in config.formats.items()},
-        "core": {
-            "latency_cycles": core.LATENCY if variant == "steady" else core.latency,
-            "cycles_per_update": core.CYCLES_PER_UPDATE if variant == "steady" else core.cycles_per_update,
-        },
+        "core": {"latency_cycles": core.latency, "cycles_per_update": core.cycles_per_update},
         "controller": {"states": 22, "timeout_clk_periods": top.frontend.controller.timeout_periods},
-        "ports": [{"name": n, "direction": d, "width": config.formats["x1"].width if n == "out_data" else w,
-                   "pins": [assigned[(n, b)].pin for p, b in port_bits(config) if p == n], "description": desc}
+        "ports": [{"name": n, "direction": d, "width": data_bits if n == "out_data" else w,
+                   "pins": [assigned[(n, b)].pin for p, b in port_bits(config, out_field) if p == n], "description": desc}
                   for n, (d, w, desc) in PORTS.items()],
         "files": sorted([verilog.name, f"{TOP_NAME}.qsf", f"{TOP_NAME}.sdc", f"{TOP_NAME}.qpf", "manifest.json",
                          "README.txt", "verilator_lint.vlt"]),
     }
-    if variant == "steady":
-        manifest["constants"] = {"k1": core.datapath.k1, "k2": core.datapath.k2, "gain_format": str(config.formats["gain"])}
+    raws = config.constant_raw(variant)
+    manifest["constants"] = {name: {"value": c[0], "raw": raws[name], "format": str(config.formats[c[1]])}
+                             for name, c in config.constants(variant).items() if isinstance(c, tuple)}
     (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
     (out_dir / "README.txt").write_text(_readme(variant, six_channel, channel, ratio, manifest))
     return manifest
 
 
+def _jsonable(value):
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, tuple | list):
+        return [_jsonable(v) for v in value]
+    return value
+
+
 def _readme(variant, six_channel, channel, ratio, manifest):
     where = "all six channels" if six_channel else f"channel {CHANNELS[channel]}"
+    out = manifest["out_data"]
     return f"""kfpga {__version__}: Quartus II 13.0sp1 project for the {DEVICE_ORDERING} (Cyclone II)
 
-Design: ADS8364 controller + {variant} Kalman core, {where}, ADC clock = 50 MHz / {ratio}.
+Design: ADS8364 controller + {manifest['filter']} filter, {variant} core, {where}, ADC clock = 50 MHz / {ratio}.
+out_data: {out['field']}, {out['format']} ({out['width']} bits).
 Core latency {manifest['core']['latency_cycles']} cycles, {manifest['core']['cycles_per_update']} cycle(s) per update.
 
 Compile (Quartus II 13.0sp1 is the last Quartus with Cyclone II):

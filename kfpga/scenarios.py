@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kfpga.model.ranges import ADC_MAX, ADC_MIN
+from kfpga.ads8364 import CODE_MAX, CODE_MIN
 
 __all__ = ["SCENARIOS", "sine", "random_accel", "adc_codes", "make"]
 
@@ -18,7 +18,7 @@ SINE_PERIOD = 2000.0
 
 def adc_codes(analog):
     """Quantise like the ADC: round half up to an integer code, saturate to 16 bits."""
-    return np.clip(np.floor(np.asarray(analog) + 0.5), ADC_MIN, ADC_MAX).astype(np.int64)
+    return np.clip(np.floor(np.asarray(analog) + 0.5), CODE_MIN, CODE_MAX).astype(np.int64)
 
 
 def sine(n, seed, *, noise_var=4.0, amplitude=SINE_AMPLITUDE, period=SINE_PERIOD, batch=()):
@@ -49,7 +49,7 @@ def random_accel(n, seed, *, q=2.0, noise_var=4.0, T=1.0, spread=8000.0, batch=(
         truth[..., k] = x1
         x1 = x1 + T * x2
         x2 = x2 + acc[..., k] - T * (w * w * truth[..., k] + 2.0 * w * x2)
-    truth = np.clip(truth, ADC_MIN, ADC_MAX)
+    truth = np.clip(truth, CODE_MIN, CODE_MAX)
     y = adc_codes(truth + rng.normal(0.0, np.sqrt(noise_var), (*batch, n)))
     return truth, y
 

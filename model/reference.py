@@ -18,6 +18,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from kfpga.params import matrix, number, vector
+
 __all__ = [
     "KalmanParams",
     "kalman_matrix",
@@ -31,9 +33,9 @@ def _default_p0():
     return ((10.0, 0.0), (0.0, 10.0))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class KalmanParams:
-    """Model parameters (defaults: the paper's T=1, Q=2, R=4, P0=10*I, x0=0).
+    """Model parameters (defaults: the paper's T=1, Q=2, R=4, P0=10*I, x0=0), validated.
 
     Parameters
     ----------
@@ -47,6 +49,9 @@ class KalmanParams:
         Initial error covariance, 2x2 symmetric positive definite.
     x0:
         Initial state estimate ``(x1, x2)``.
+
+    Raises ``TypeError`` for a value of the wrong type and ``ValueError`` for a wrong value,
+    the message starting with the field's name.
     """
 
     T: float = 1.0
@@ -56,8 +61,12 @@ class KalmanParams:
     x0: tuple = (0.0, 0.0)
 
     def __post_init__(self):
-        object.__setattr__(self, "P0", tuple(tuple(float(v) for v in row) for row in self.P0))
-        object.__setattr__(self, "x0", tuple(float(v) for v in self.x0))
+        s = object.__setattr__
+        s(self, "T", number("T", self.T, minimum=0.0, strict=True))
+        s(self, "Q", number("Q", self.Q, minimum=0.0))
+        s(self, "R", number("R", self.R, minimum=0.0, strict=True))
+        s(self, "P0", matrix("P0", self.P0, 2, 2, symmetric=True, positive_definite=True))
+        s(self, "x0", vector("x0", self.x0, 2))
 
     @property
     def phi(self):
@@ -115,19 +124,12 @@ def kalman_matrix(y, params=KalmanParams()):
     return {"x": xs, "yhat": yh, "K": ks, "P": ps}
 
 
-#: Names of the quantities :func:`kalman_decomposed` records, in datapath order.
-DECOMPOSED_TRACE = (
-    "xl1", "pl11", "pl12", "pl21", "pl22", "S", "K1", "K2", "e",
-    "x1", "x2", "p11", "p12", "p21", "p22",
-)
-
-
-def kalman_decomposed(y, params=KalmanParams(), *, trace=False):
+def kalman_decomposed(y, params=KalmanParams()):
     """Run the decomposed (scalar) Kalman filter, vectorised along leading batch axes.
 
     ``y`` has shape ``(..., n)``; every channel starts from ``params.x0`` and ``params.P0``.
-    Returns a dict with ``x1``, ``x2``, ``yhat`` of the same shape as ``y`` and, with
-    ``trace=True``, every intermediate of :data:`DECOMPOSED_TRACE`.
+    Returns a dict with ``x1``, ``x2``, ``yhat`` of the same shape as ``y``, the gains ``K``
+    (``(..., n, 2)``) and the filtered covariances ``P`` (``(..., n, 2, 2)``).
     """
     y = np.asarray(y, dtype=np.float64)
     n = y.shape[-1]
@@ -136,8 +138,8 @@ def kalman_decomposed(y, params=KalmanParams(), *, trace=False):
     x1 = np.full(batch, params.x0[0])
     x2 = np.full(batch, params.x0[1])
     p11, p12, p21, p22 = (np.full(batch, v) for v in (*params.P0[0], *params.P0[1]))
-    names = DECOMPOSED_TRACE if trace else ("xl1", "x1", "x2")
-    rec = {name: np.empty(y.shape) for name in names}
+    rec = {name: np.empty(y.shape) for name in ("xl1", "x1", "x2")}
+    gains, covs = np.empty((*y.shape, 2)), np.empty((*y.shape, 2, 2))
     for k in range(n):
         yk = y[..., k]
         # time update
@@ -157,16 +159,10 @@ def kalman_decomposed(y, params=KalmanParams(), *, trace=False):
         x2 = xl2 + k2 * e                                     # x2 = xl2 + K2 e
         p11, p12 = pl11 - k1 * pl11, pl12 - k1 * pl12         # p1j = pl1j - K1 pl1j
         p21, p22 = pl21 - k2 * pl11, pl22 - k2 * pl12         # p2j = pl2j - K2 pl1j
-        if trace:
-            values = (xl1, pl11, pl12, pl21, pl22, s, k1, k2, e, x1, x2, p11, p12, p21, p22)
-        else:
-            values = (xl1, x1, x2)
-        for name, value in zip(names, values, strict=True):
-            rec[name][..., k] = value
-    out = {"x1": rec["x1"], "x2": rec["x2"], "yhat": rec["xl1"]}
-    if trace:
-        out["trace"] = rec
-    return out
+        rec["xl1"][..., k], rec["x1"][..., k], rec["x2"][..., k] = xl1, x1, x2
+        gains[..., k, 0], gains[..., k, 1] = k1, k2
+        covs[..., k, 0, 0], covs[..., k, 0, 1], covs[..., k, 1, 0], covs[..., k, 1, 1] = p11, p12, p21, p22
+    return {"x1": rec["x1"], "x2": rec["x2"], "yhat": rec["xl1"], "K": gains, "P": covs}
 
 
 def steady_state_gain(T=1.0, Q=2.0, R=4.0):

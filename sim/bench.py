@@ -21,9 +21,10 @@ from cocotb.simtime import get_sim_time
 from cocotb.triggers import ClockCycles, Edge, Event, FallingEdge, ReadOnly, RisingEdge, Timer
 
 from kfpga.analysis import float_run, rmse, sqnr_db
-from kfpga.config import KalmanConfig
+from kfpga.board import SYSTEM_PERIOD_NS
+from kfpga.config import FilterConfig
 from kfpga.hw.ads8364 import SampleLayout
-from kfpga.hw.kalman import estimate_layout
+from kfpga.hw.layouts import input_layout, output_layout
 from kfpga.sim.ads8364 import ADS8364
 from kfpga.sim.scoreboard import Scoreboard
 from kfpga.sim.sources import csv_source, scenario_source
@@ -32,7 +33,6 @@ from kfpga.sim.streams import StreamSink, StreamSource
 __all__ = ["sim_params", "write_results", "AdcPins", "CoreTB", "SystemTB", "FrontendTB", "load_config"]
 
 ENV = "KFPGA_SIM"
-SYS_PERIOD_NS = 20  # 50 MHz
 
 
 def sim_params():
@@ -42,8 +42,8 @@ def sim_params():
 def load_config(params):
     text = params.get("config_toml")
     if not text:
-        return KalmanConfig()
-    return KalmanConfig.from_dict(tomllib.loads(text), source="config")
+        return FilterConfig()
+    return FilterConfig.from_dict(tomllib.loads(text), source="config")
 
 
 def write_results(params, report):
@@ -137,21 +137,22 @@ def make_source(params, count):
 
 
 class CoreTB:
-    """A Kalman core alone: stream source on ``i``, stream sink on ``o``, scoreboard."""
+    """A filter core alone: stream source on ``i``, stream sink on ``o``, scoreboard."""
 
     def __init__(self, dut, params):
         self.dut = dut
         self.params = params
         self.config = load_config(params)
         self.variant = params["variant"]
+        self.channels = int(params.get("channels", 1))
         seed = params["seed"]
         dut._log.info(f"seed {seed}")
-        self.source = StreamSource(dut, "i", dut.clk, SampleLayout, rng=random.Random(seed),
-                                   p_idle=params.get("p_idle", 0.0))
-        self.sink = StreamSink(dut, "o", dut.clk, estimate_layout(self.config), rng=random.Random(seed + 1),
-                               p_ready=params.get("p_ready", 1.0))
+        self.source = StreamSource(dut, "i", dut.clk, input_layout(self.config.spec, self.channels),
+                                   rng=random.Random(seed), p_idle=params.get("p_idle", 0.0))
+        self.sink = StreamSink(dut, "o", dut.clk, output_layout(self.config, self.channels),
+                               rng=random.Random(seed + 1), p_ready=params.get("p_ready", 1.0))
         self.scoreboard = Scoreboard(self.config, self.variant)
-        Clock(dut.clk, SYS_PERIOD_NS, unit="ns").start()
+        Clock(dut.clk, SYSTEM_PERIOD_NS, unit="ns").start()
 
     async def reset(self):
         self.dut.rst.value = 1
@@ -169,7 +170,7 @@ class FrontendTB:
         self.pins = AdcPins(dut, self.adc)
         self.sink = StreamSink(dut, "o", dut.clk, SampleLayout, rng=random.Random(params["seed"]),
                                p_ready=params.get("p_ready", 1.0))
-        Clock(dut.clk, SYS_PERIOD_NS, unit="ns").start()
+        Clock(dut.clk, SYSTEM_PERIOD_NS, unit="ns").start()
 
     async def reset(self):
         self.dut.rst.value = 1
@@ -177,12 +178,12 @@ class FrontendTB:
         self.dut.rst.value = 0
 
 
-def _per_channel_float(config, variant, channels, codes):
-    """Float x1 of each sample, each channel filtered on its own from x0, P0."""
+def _per_channel_float(config, variant, channels, codes, field):
+    """The float filter's ``field`` for each sample, each channel filtered on its own from reset."""
     out = np.zeros(len(codes))
     for ch in np.unique(channels):
         idx = np.flatnonzero(channels == ch)
-        out[idx] = float_run(config, variant, codes[idx])[0]
+        out[idx] = float_run(config, variant, codes[idx])[field]
     return out
 
 
@@ -200,17 +201,18 @@ class SystemTB:
         self.config = load_config(params)
         self.variant = params["variant"]
         self.six = bool(params.get("six"))
+        self.field = params.get("out_field") or self.config.spec.default_output
         dut._log.info(f"seed {params['seed']}")
         self.source = make_source(params, expected_conversions)
         self.adc = ADS8364(self.source)
         self.pins = AdcPins(dut, self.adc)
-        self.outputs = []  # (time_ns, channel, x1, sticky overflow flag)
+        self.outputs = []  # (time_ns, channel, out_data, sticky overflow flag)
         self.resets = []  # times rst_n fell
         self._want = 0
         self._enough = Event()
         self.progress_file = Path(params["results"] + ".progress") if params.get("results") else None
         dut.rst_n.value = 1
-        Clock(dut.clk50, SYS_PERIOD_NS, unit="ns").start()
+        Clock(dut.clk50, SYSTEM_PERIOD_NS, unit="ns").start()
 
     async def reset(self, cycles=4):
         self.resets.append(now_ns())
@@ -247,16 +249,16 @@ class SystemTB:
         await self._enough.wait()
 
     def _error_vs_float(self):
-        """The hardware's x1 against the float filter (and the truth) on the same samples."""
+        """The hardware's output field against the float filter (and the truth) on the same samples."""
         n = min(len(self.outputs), len(self.adc.reads))
         if n == 0:
             return {}
         reads = self.adc.reads[:n]
         channels = np.array([r.channel for r in reads])
         codes = np.array([r.code for r in reads], dtype=np.int64)
-        fmt = self.config.formats["x1"]
+        fmt = self.config.formats[self.config.spec.output(self.field).point]
         hw = fmt.to_float([o[2] for o in self.outputs[:n]])
-        flt = _per_channel_float(self.config, self.variant, channels, codes)
+        flt = _per_channel_float(self.config, self.variant, channels, codes, self.field)
         out = {
             "max_abs_hw_minus_float": float(np.max(np.abs(hw - flt))),
             "max_abs_hw_minus_float_lsb": float(np.max(np.abs(hw - flt)) / fmt.lsb),
@@ -285,8 +287,8 @@ class SystemTB:
                 sb.add_input(reads[i].channel, reads[i].code)
                 i += 1
             while j < len(outs) and outs[j][0] < bound:
-                _, ch, x1, sticky = outs[j]
-                sb.add_output(channel=ch, x1=x1, sticky=sticky)
+                _, ch, value, sticky = outs[j]
+                sb.add_output(channel=ch, sticky=sticky, **{self.field: value})
                 j += 1
         result = sb.check(pending_allowed=pending_allowed)
         if not self.resets:

@@ -19,7 +19,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
-from kfpga.config import KalmanConfig
+from kfpga.config import FilterConfig
 from kfpga.hw.generate import TOP_NAME, write_block, write_top
 from kfpga.tools import simulator_available, verilator_env
 
@@ -78,7 +78,7 @@ def build(simulator, design, *, config=None, root=DEFAULT_ROOT, waves=False, qui
     ok, why = simulator_available(simulator)
     if not ok:
         raise FileNotFoundError(why)
-    config = KalmanConfig() if config is None else config
+    config = FilterConfig() if config is None else config
     root = Path(root).resolve()
     staging = root / "src" / f"{design}-{os.getpid()}"
     verilog, toplevel = _design_verilog(staging, design, config, opts)

@@ -1,35 +1,41 @@
-"""Scoreboard: the bit-accurate model on exactly the samples the DUT received, integer by integer."""
+"""Scoreboard: the bit-accurate model on exactly the samples the DUT received, integer by integer.
+
+One check for every simulator: the Amaranth unit tests and the cocotb benches both feed it.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
-from kfpga.model.kalman import FixedKalman
+from kfpga.fixedmodel import FixedModel
 
 __all__ = ["Scoreboard"]
-
-FIELDS = ("channel", "x1", "x2", "yhat", "overflow", "sticky")
 
 
 class Scoreboard:
     """Collect the DUT's inputs and outputs, then compare them with the model.
 
-    Inputs are ``(channel, code)`` in the order the filter received them; outputs are dicts
-    with ``channel`` and ``x1`` and, when the DUT shows them, ``x2``, ``yhat``, ``overflow``
-    (the sample's flag) and ``sticky`` (the OR of the flags since the last reset).
-    :meth:`reset` marks a reset of the DUT: the filter state returns to x0/P0 (as in the
-    model from then on), and inputs that had not produced an output yet were in flight and
-    are dropped (counted in the report).
+    Inputs are ``(channel, codes)`` in the order the filter received them (``codes`` an int for
+    a one-input filter, else ``{input: int}``); outputs are dicts with ``channel`` and any of the
+    filter's output fields, ``overflow`` (the sample's flag) and ``sticky`` (the OR of the flags
+    since the last reset), as far as the DUT shows them. :meth:`reset` marks a reset of the
+    DUT: the filter state returns to its reset value (as in the model from then on), and
+    inputs that had not produced an output yet were in flight and are dropped (counted in the
+    report).
     """
 
     def __init__(self, config, variant):
-        self.model = FixedKalman(config, variant=variant)
+        self.model = FixedModel(config, variant=variant)
+        self.fields = ("channel", *self.model.outputs, "overflow", "sticky")
         self.segments = [([], [])]
 
-    def add_input(self, channel, code):
-        self.segments[-1][0].append((int(channel), int(code)))
+    def add_input(self, channel, codes):
+        self.segments[-1][0].append((int(channel), codes))
 
     def add_output(self, **fields):
+        unknown = set(fields) - set(self.fields)
+        if unknown:
+            raise KeyError(f"unknown output field(s) {', '.join(sorted(unknown))}; known: {', '.join(self.fields)}")
         self.segments[-1][1].append(fields)
 
     def reset(self):
@@ -42,6 +48,18 @@ class Scoreboard:
     @property
     def outputs(self):
         return sum(len(o) for _, o in self.segments)
+
+    def expected(self, inputs):
+        """The model's fields for a list of ``(channel, codes)``, in order, from the reset state."""
+        channels = np.array([c for c, _ in inputs])
+        names = self.model.inputs
+        if len(names) == 1:
+            codes = np.array([int(v) if not isinstance(v, dict) else int(v[names[0]]) for _, v in inputs], dtype=np.int64)
+        else:
+            codes = {n: np.array([int(v[n]) for _, v in inputs], dtype=np.int64) for n in names}
+        outputs, overflow, _ = self.model.run_channels(codes, channels)
+        return {"channel": channels, **outputs, "overflow": overflow.astype(int),
+                "sticky": np.logical_or.accumulate(overflow).astype(int)}
 
     def check(self, *, pending_allowed=0):
         """Compare everything; returns a report dict (``mismatches`` 0 means bit-exact).
@@ -59,14 +77,11 @@ class Scoreboard:
                 dropped += len(inputs) - min(len(outputs), len(inputs))
             if not inputs:
                 continue
-            channels = np.array([c for c, _ in inputs])
-            codes = np.array([v for _, v in inputs], dtype=np.int64)
-            x1, x2, yhat, ovf = self.model.run_channels(codes, channels)
-            expected = {"channel": channels, "x1": x1, "x2": x2, "yhat": yhat, "overflow": ovf.astype(int),
-                        "sticky": np.logical_or.accumulate(ovf).astype(int)}
+            expected = self.expected(inputs)
             for n, out in enumerate(outputs[: len(inputs)]):
                 compared += 1
-                bad = {f: (out[f], int(expected[f][n])) for f in FIELDS if f in out and int(out[f]) != int(expected[f][n])}
+                bad = {f: (int(out[f]), int(expected[f][n])) for f in self.fields
+                       if f in out and int(out[f]) != int(expected[f][n])}
                 if bad:
                     mismatches += 1
                     if len(first) < 10:
@@ -86,3 +101,12 @@ class Scoreboard:
             "first_mismatches": first,
             "ok": mismatches == 0 and missing == 0 and extra == 0 and compared > 0,
         }
+
+    def assert_ok(self, **kwargs):
+        """:meth:`check`, failing with the first mismatches when not bit-exact."""
+        report = self.check(**kwargs)
+        if not report["ok"]:
+            raise AssertionError(
+                f"DUT != model: {report['mismatches']} mismatch(es) in {report['compared']} compared, "
+                f"{report['missing']} missing, {report['extra']} extra; first: {report['first_mismatches'][:3]}")
+        return report

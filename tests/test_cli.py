@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from kfpga.cli import main
-from kfpga.model.kalman import FixedKalman
+from kfpga.fixedmodel import FixedModel
 
 COMPARE_KEYS = {"variant", "samples", "seed", "rmse_raw", "rmse_float", "rmse_fixed",
                 "max_abs_fixed_minus_float_lsb", "sqnr_db", "overflows"}
@@ -46,7 +46,7 @@ def test_compare_report_and_plot(capsys, tmp_path):
     code, out, _ = run_cli(capsys, "compare", "--scenario", "random-accel", "--samples", "3000", "--seed", "1",
                            "--plot", str(png))
     assert code == 0
-    assert "RMSE vs truth" in out and "SQNR" in out and "overflows" in out
+    assert "RMSE of x1 vs truth" in out and "SQNR" in out and "overflows" in out
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -67,11 +67,10 @@ def test_filter_one_row_per_input_row_bit_exact(capsys, tmp_path):
     assert code == 0 and "700 samples filtered" in err
     rows = list(csv.DictReader(dst.open()))
     assert len(rows) == 700 and list(rows[0]) == ["x1", "x2", "yhat", "overflow"]
-    model = FixedKalman(variant="full")
-    x1, x2, yhat = model.to_float(model.run(y))
-    np.testing.assert_array_equal([float(r["x1"]) for r in rows], x1)
-    np.testing.assert_array_equal([float(r["x2"]) for r in rows], x2)
-    np.testing.assert_array_equal([float(r["yhat"]) for r in rows], yhat)
+    model = FixedModel(variant="full")
+    expected = model.to_float(model.run(y))
+    for field in ("x1", "x2", "yhat"):
+        np.testing.assert_array_equal([float(r[field]) for r in rows], expected[field])
 
 
 def test_filter_float(capsys, tmp_path):
@@ -162,7 +161,27 @@ def test_formats_table_and_toml(capsys, tmp_path):
 def test_console_script_help_and_usage_errors():
     exe = [sys.executable, "-m", "kfpga.cli"]
     out = subprocess.run([*exe, "--help"], capture_output=True, text=True, check=True).stdout
-    for command in ("compare", "sweep", "filter", "formats"):
+    for command in ("compare", "sweep", "filter", "filters", "formats", "generate", "simulate", "resources"):
         assert command in out
     bad = subprocess.run([*exe, "compare", "--samples", "-3"], capture_output=True, text=True)
     assert bad.returncode == 2 and "must be a positive integer" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_filters_lists_the_registry(capsys):
+    code, out, _ = run_cli(capsys, "filters")
+    assert code == 0
+    assert out.splitlines()[0].startswith("kalman2    the paper's 2-state Kalman filter")
+    assert "--variant steady" in out and "--variant full" in out and "outputs x1, x2, yhat" in out
+    code, out, _ = run_cli(capsys, "filters", "--json")
+    rows = json.loads(out)
+    assert [r["name"] for r in rows] == ["kalman2"] and rows[0]["default"]
+
+
+def test_filter_option_and_config_must_agree(capsys, tmp_path):
+    code, out, _ = run_cli(capsys, "compare", "--filter", "kalman2", "--samples", "300", "--seed", "1", "--json")
+    assert code == 0 and json.loads(out)["filter"] == "kalman2"
+    code, _, err = run_cli(capsys, "compare", "--filter", "nosuch", "--samples", "300")
+    assert code == 2 and err.strip() == "kfpga compare: error: --filter: no filter named 'nosuch'; registered: kalman2"
+    code, _, err = run_cli(capsys, "compare", "--variant", "fast", "--samples", "300")
+    assert code == 2 and err.strip() == ("kfpga compare: error: variant must be one of steady, full for the kalman2 "
+                                         "filter, not 'fast'")

@@ -1,11 +1,21 @@
 """Config: defaults from range analysis, validation messages, TOML round trip."""
 
+import re
+
 import numpy as np
 import pytest
 
-from kfpga.config import POINTS, ConfigError, KalmanConfig, analysed_ranges
+from kfpga.config import ConfigError, FilterConfig, analysed_ranges
 from kfpga.fixed import QFormat
+from kfpga.model.kalman2 import POINTS
 from kfpga.model.reference import KalmanParams
+
+KalmanConfig = FilterConfig  # the paper's filter is the default
+
+
+def exactly(message):
+    """A ``match=`` pattern for exactly this message."""
+    return "^" + re.escape(message) + "$"
 
 
 def test_defaults_cover_the_analysed_ranges_with_a_guard_bit():
@@ -38,18 +48,31 @@ def test_ranges_reflect_the_full_scale_stimulus():
 
 @pytest.mark.parametrize(("model", "message"), [
     ({"R": 0.0}, "model.R must be > 0, not 0.0"),
-    ({"R": -4.0}, "model.R must be > 0"),
+    ({"R": -4.0}, "model.R must be > 0, not -4.0"),
     ({"Q": -1.0}, "model.Q must be >= 0, not -1.0"),
     ({"T": 0.0}, "model.T must be > 0, not 0.0"),
-    ({"T": -1.0}, "model.T must be > 0"),
-    ({"P0": [[1.0, 2.0], [2.0, 1.0]]}, "model.P0 must be positive definite"),
-    ({"P0": [[1.0, 0.5], [0.0, 1.0]]}, "model.P0 must be symmetric"),
-    ({"P0": [[1.0, 0.0], [0.0, 0.0]]}, "model.P0 must be positive definite"),
+    ({"T": -1.0}, "model.T must be > 0, not -1.0"),
+    ({"T": float("inf")}, "model.T must be finite, not inf"),
+    ({"P0": [[1.0, 2.0], [2.0, 1.0]]}, "model.P0 must be positive definite, not [[1.0, 2.0], [2.0, 1.0]] (eigenvalues -1, 3)"),
+    ({"P0": [[1.0, 0.5], [0.0, 1.0]]}, "model.P0 must be symmetric, not [[1.0, 0.5], [0.0, 1.0]]"),
+    ({"P0": [[1.0, 0.0], [0.0, 0.0]]}, "model.P0 must be positive definite, not [[1.0, 0.0], [0.0, 0.0]] (eigenvalues 0, 1)"),
+    ({"P0": [1.0, 2.0]}, "model.P0 must be a 2x2 matrix (a list of rows), not [1.0, 2.0]"),
+    ({"x0": [1.0]}, "model.x0 must have 2 entries, not 1: [1.0]"),
     ({"T": "fast"}, "model.T must be a number, not 'fast'"),
+    ({"R": True}, "model.R must be a number, not True"),
 ])
 def test_bad_model_parameters_name_the_field(model, message):
-    with pytest.raises(ConfigError, match=message.replace("[", r"\[").replace(".", r"\.")):
+    with pytest.raises(ConfigError, match=exactly(message)):
         KalmanConfig.from_dict({"model": model})
+
+
+def test_params_raise_type_and_value_errors():
+    with pytest.raises(TypeError, match=exactly("T must be a number, not 'fast'")):
+        KalmanParams(T="fast")
+    with pytest.raises(ValueError, match=exactly("R must be > 0, not 0.0")):
+        KalmanParams(R=0.0)
+    with pytest.raises(TypeError):
+        KalmanParams(1.0)  # keyword-only
 
 
 def test_format_too_narrow_names_field_and_range():
@@ -58,42 +81,82 @@ def test_format_too_narrow_names_field_and_range():
 
 
 def test_product_too_wide_is_rejected():
-    with pytest.raises(ConfigError, match=r"the sum xl1 = x1 \+ v is 71 bits wide with formats\.v = Q17\.8, "
-                                          r"formats\.x1 = Q20\.50.*within 62 bits"):
+    with pytest.raises(ConfigError, match=exactly(
+            "the sum xl1 = x1 + v is 71 bits wide with formats.v = Q17.8, formats.x1 = Q20.50; sums and products "
+            "must stay within 62 bits to be held exactly: narrow these formats")):
         KalmanConfig(formats={"x1": QFormat(20, 50), "xl1": QFormat(20, 50)})
-    with pytest.raises(ConfigError, match=r"the sum x1 = xl1 \+ K1\*e is 63 bits wide with formats\.e = Q17\.1, "
-                                          r"formats\.gain = Q2\.16, formats\.xl1 = Q45\.16"):
+    with pytest.raises(ConfigError, match=exactly(
+            "the sum x1 = xl1 + k1*e is 63 bits wide with formats.e = Q17.1, formats.gain = Q2.16, formats.xl1 = "
+            "Q45.16; sums and products must stay within 62 bits to be held exactly: narrow these formats")):
         KalmanConfig(formats={"xl1": QFormat(45, 16)})
 
 
 def test_operand_wider_than_a_multiplier_is_rejected():
-    with pytest.raises(ConfigError, match=r"formats\.e = Q17\.4 is 21 bits wide.*18x18"):
+    with pytest.raises(ConfigError, match=exactly(
+            "formats.e = Q17.4 is 21 bits wide, but it feeds an embedded multiplier and Cyclone II's take at "
+            "most 18x18 bits")):
         KalmanConfig(formats={"e": QFormat(17, 4)})
 
 
 def test_r_too_small_for_its_format():
-    with pytest.raises(ConfigError, match=r"model\.R = 1e-05 rounds to 0 in formats\.s"):
+    with pytest.raises(ConfigError, match=exactly(
+            "model.R = 1e-05 rounds to 0 in formats.s = Q7.11 (LSB 0.000488281): the divisor S = pl11 + R could "
+            "be 0; give s more fraction bits")):
         KalmanConfig(params=KalmanParams(R=1e-5), formats={"s": QFormat(7, 11)}, check_ranges=False)
 
 
 def test_steady_variant_needs_q():
     cfg = KalmanConfig(params=KalmanParams(Q=0.0))
     cfg.require_variant("full")
-    with pytest.raises(ConfigError, match="needs Q > 0"):
+    with pytest.raises(ConfigError, match=exactly(
+            "model.Q = 0.0: the steady-state variant needs Q > 0 (Q = 0 gives K_inf = 0)")):
         cfg.require_variant("steady")
-    with pytest.raises(ConfigError, match="variant must be one of steady, full, not 'fast'"):
+    with pytest.raises(ConfigError, match=exactly(
+            "variant must be one of steady, full for the kalman2 filter, not 'fast'")):
         cfg.require_variant("fast")
 
 
 def test_unknown_keys_are_rejected():
-    with pytest.raises(ConfigError, match="unknown key model.P1"):
+    with pytest.raises(ConfigError, match=exactly("config: unknown key model.P1; the kalman2 filter has: T, Q, R, P0, x0")):
         KalmanConfig.from_dict({"model": {"P1": 3}})
-    with pytest.raises(ConfigError, match="formats.x3: unknown quantisation point"):
+    with pytest.raises(ConfigError, match=exactly(
+            "formats.x3: unknown quantisation point; known: x1, xl1, v, x2, e, gain, p, pl, s, inv_t, vt")):
         KalmanConfig.from_dict({"formats": {"x3": "Q4.4"}})
-    with pytest.raises(ConfigError, match="unknown section"):
+    with pytest.raises(ConfigError, match=exactly(
+            "config: unknown section(s) modle; expected [filter], [model] and [formats.*]")):
         KalmanConfig.from_dict({"modle": {}})
-    with pytest.raises(ConfigError, match="formats.x1: rounding must be one of"):
+    with pytest.raises(ConfigError, match=exactly("formats.x1: rounding must be one of floor, half_up, not 'up'")):
         KalmanConfig.from_dict({"formats": {"x1": {"format": "Q18.8", "rounding": "up"}}})
+    with pytest.raises(ConfigError, match=exactly("config: filter.name: no filter named 'kalman9'; registered: kalman2")):
+        KalmanConfig.from_dict({"filter": {"name": "kalman9"}})
+    with pytest.raises(ConfigError, match=exactly(
+            "config: unknown key(s) filter.T; [filter] has only name (the parameters go in [model])")):
+        KalmanConfig.from_dict({"filter": {"name": "kalman2", "T": 1.0}})
+    with pytest.raises(ConfigError, match=exactly("formats.inv_t: this kalman2 model has no point inv_t "
+                                                  "(1/T, when T is not a power of two)")):
+        KalmanConfig.from_dict({"formats": {"inv_t": "Q3.15"}})
+
+
+def test_omitted_rules_keep_the_defaults():
+    cfg = KalmanConfig.from_dict({"formats": {"x1": {"format": "Q18.10"}, "v": "Q17.9"}})
+    assert cfg.formats["x1"] == QFormat(18, 10, "half_up", "saturate")
+    assert cfg.formats["v"] == QFormat(17, 9, "half_up", "saturate")
+    with pytest.raises(ConfigError, match=exactly("formats.x1: give either format or int_bits and frac_bits, not both")):
+        KalmanConfig.from_dict({"formats": {"x1": {"format": "Q18.10", "int_bits": 18}}})
+
+
+def test_formats_are_read_only_and_a_config_is_frozen():
+    cfg = KalmanConfig()
+    with pytest.raises(TypeError):
+        cfg.formats["x1"] = QFormat(20, 8)
+    with pytest.raises(AttributeError):
+        cfg.check_ranges = False
+
+
+def test_filter_section_names_the_filter_and_old_files_still_load():
+    old = KalmanConfig.from_dict({"model": {"T": 0.5}, "formats": {"x1": "Q19.8"}})
+    new = KalmanConfig.from_dict({"filter": {"name": "kalman2"}, "model": {"T": 0.5}, "formats": {"x1": "Q19.8"}})
+    assert old == new and old.filter == "kalman2"
 
 
 def test_toml_round_trip(tmp_path):
@@ -107,11 +170,13 @@ def test_toml_round_trip(tmp_path):
 
 
 def test_toml_errors(tmp_path):
-    with pytest.raises(ConfigError, match="no such config file"):
+    from kfpga.errors import InputError
+
+    with pytest.raises(InputError, match=exactly(f"{tmp_path / 'missing.toml'}: no such config file")):
         KalmanConfig.from_toml(tmp_path / "missing.toml")
     bad = tmp_path / "bad.toml"
     bad.write_text("[model\nT = 1")
-    with pytest.raises(ConfigError, match="not valid TOML"):
+    with pytest.raises(ConfigError, match="^" + re.escape(f"{bad}: not valid TOML: ")):
         KalmanConfig.from_toml(bad)
 
 

@@ -1,22 +1,12 @@
 """The format type and the quantisation rules: pinned by tables, cross-checked with fxpmath."""
 
+import re
+
 import numpy as np
 import pytest
 from fxpmath import Fxp
 
-from kfpga.fixed import (
-    Overflow,
-    QFormat,
-    Rounding,
-    bits_for,
-    make_requantizer,
-    requantize,
-    shift_round,
-    to_raw,
-)
-
-SEED = 1234
-
+from kfpga.fixed import Overflow, QFormat, Rounding, bits_for, requantize, shift_round, to_raw
 
 # -- the format type ---------------------------------------------------------------------
 
@@ -41,7 +31,7 @@ def test_format_geometry():
     ],
 )
 def test_format_rejects_bad_arguments(kwargs, message):
-    with pytest.raises(ValueError, match=message):
+    with pytest.raises(ValueError, match="^" + re.escape(message)):
         QFormat(**kwargs)
 
 
@@ -112,9 +102,6 @@ def test_overflow_table(value, sat, wrap, flag):
         assert requantize(value, 0, fmt) == (expected, flag)
         out, f = requantize(np.array([value]), 0, fmt)
         assert (out[0], bool(f[0])) == (expected, flag)
-        assert make_requantizer(0, fmt, vector=False)(value) == (expected, flag)
-        out, f = make_requantizer(0, fmt, vector=True)(np.array([value]))
-        assert (out[0], bool(f[0])) == (expected, flag)
 
 
 def test_most_negative_value_rounds_and_saturates():
@@ -141,9 +128,8 @@ def test_to_raw_rounds_constants():
 
 @pytest.mark.parametrize("overflow", ["saturate", "wrap"])
 @pytest.mark.parametrize("rounding", ["floor", "half_up"])
-def test_requantize_matches_fxpmath(rounding, overflow):
-    print(f"seed {SEED}")
-    rng = np.random.default_rng(SEED)
+def test_requantize_matches_fxpmath(rounding, overflow, seed):
+    rng = np.random.default_rng(seed)
     count = 5000
     for _ in range(20):
         src_frac = int(rng.integers(0, 12))
@@ -161,18 +147,13 @@ def test_requantize_matches_fxpmath(rounding, overflow):
         rounded = shift_round(raw.astype(object), src_frac - fmt.frac_bits, fmt.rounding)
         expected_flags = np.array([not fmt.min_raw <= int(r) <= fmt.max_raw for r in rounded])
         np.testing.assert_array_equal(flags, expected_flags)
-        # the fast closures agree with the reference function on ints and arrays
-        vec = make_requantizer(src_frac, fmt, vector=True)(raw.astype(np.int64))
-        np.testing.assert_array_equal(vec[0], ours)
-        np.testing.assert_array_equal(vec[1], flags)
-        scalar = make_requantizer(src_frac, fmt, vector=False)
+        # the int path agrees with the array path
         for r, o, fl in zip(raw[:300].tolist(), ours[:300].tolist(), flags[:300].tolist(), strict=True):
-            assert scalar(r) == (o, fl)
+            assert requantize(r, src_frac, fmt) == (o, fl)
 
 
-def test_to_raw_matches_fxpmath_on_floats():
-    print(f"seed {SEED}")
-    rng = np.random.default_rng(SEED)
+def test_to_raw_matches_fxpmath_on_floats(seed):
+    rng = np.random.default_rng(seed)
     values = rng.uniform(-300, 300, 3000)
     fmt = QFormat(8, 6, Rounding.FLOOR, Overflow.SATURATE)
     ours, _ = to_raw(values, fmt)

@@ -5,7 +5,7 @@ import re
 import pytest
 
 from kfpga.cli import main
-from kfpga.config import KalmanConfig
+from kfpga.config import FilterConfig
 from kfpga.hw.generate import FORBIDDEN, LINT_WAIVERS, TOP_NAME, write_block, write_top
 from kfpga.hw.top import PORTS
 from kfpga.tools import iverilog_parse, iverilog_path, verilator_lint
@@ -17,7 +17,7 @@ DESIGNS = [("steady", False), ("full", False), ("steady", True), ("full", True)]
 def top_verilog(request, tmp_path_factory):
     variant, six = request.param
     out = tmp_path_factory.mktemp(f"gen_{variant}_{six}")
-    path, top = write_top(out, KalmanConfig(), variant=variant, six_channel=six, channel=3)
+    path, top = write_top(out, FilterConfig(), variant=variant, six_channel=six, channel=3)
     return path, top
 
 
@@ -58,7 +58,7 @@ def test_ports_are_the_documented_pins(top_verilog):
     header = re.search(rf"^module {TOP_NAME}\((.*?)\);", text, re.MULTILINE | re.DOTALL)[1]
     names = {p.strip() for p in header.split(",")}
     assert names == set(PORTS)
-    width = top.config.formats["x1"].width
+    width = top.config.formats[top.config.spec.output(top.out_field).point].width
     for name, (direction, bits, _) in PORTS.items():
         bits = width if name == "out_data" else bits
         decl = "input" if direction == "in" else "output"
@@ -72,7 +72,7 @@ def test_ports_are_the_documented_pins(top_verilog):
     ("divider", {"ratio": 10}), ("controller", {"six_channel": True}),
 ])
 def test_blocks_lint_clean(tmp_path, block, kwargs):
-    path, _ = write_block(tmp_path, block, KalmanConfig() if block == "core" else None, **kwargs)
+    path, _ = write_block(tmp_path, block, FilterConfig() if block == "core" else None, **kwargs)
     rc, out = verilator_lint(path, path.stem, tmp_path / "verilator_lint.vlt")
     assert rc == 0, out
 

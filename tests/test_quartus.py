@@ -7,7 +7,7 @@ import shlex
 import pytest
 
 from kfpga.cli import main
-from kfpga.config import KalmanConfig
+from kfpga.config import FilterConfig
 from kfpga.hw.resources import estimate
 from kfpga.hw.top import PORTS
 from kfpga.model.reference import KalmanParams
@@ -58,7 +58,7 @@ def expand(pattern_list, config):
 @pytest.fixture(scope="module", params=["steady", "full"])
 def project(request, tmp_path_factory):
     out = tmp_path_factory.mktemp(f"q_{request.param}")
-    config = KalmanConfig()
+    config = FilterConfig()
     manifest = write_project(out, config, variant=request.param)
     return out, config, manifest
 
@@ -173,7 +173,7 @@ def default_rows():
 def test_pin_table_errors_name_the_line(tmp_path, edit, message):
     table = write_table(tmp_path / "pins.csv", edit(default_rows()))
     with pytest.raises(PinError, match=message):
-        write_project(tmp_path / "out", KalmanConfig(), variant="steady", pins=table)
+        write_project(tmp_path / "out", FilterConfig(), variant="steady", pins=table)
 
 
 def test_generate_command_with_bad_pins_is_one_line(tmp_path, capsys):
@@ -185,7 +185,7 @@ def test_generate_command_with_bad_pins_is_one_line(tmp_path, capsys):
 
 def test_ratio_too_fast_for_the_adc_is_refused(tmp_path):
     with pytest.raises(PinError, match=r"--ratio 8 makes the ADC clock 6.25 MHz; the ADS8364 allows 5 MHz"):
-        write_project(tmp_path, KalmanConfig(), variant="steady", ratio=8)
+        write_project(tmp_path, FilterConfig(), variant="steady", ratio=8)
 
 
 @pytest.mark.slow
@@ -210,5 +210,5 @@ def test_resource_report_is_consistent(tmp_path, capsys):
 def test_t_not_a_power_of_two_costs_one_multiplier(tmp_path):
     from kfpga.hw.generate import write_block
 
-    path, _ = write_block(tmp_path, "core", KalmanConfig(params=KalmanParams(T=0.3)), variant="steady")
+    path, _ = write_block(tmp_path, "core", FilterConfig(params=KalmanParams(T=0.3)), variant="steady")
     assert estimate(path, path.stem)["mul18"] == 3

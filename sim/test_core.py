@@ -1,4 +1,4 @@
-"""cocotb: a Kalman core alone, on its generated Verilog, against the bit-accurate model."""
+"""cocotb: a filter core alone, on its generated Verilog, against the bit-accurate model."""
 
 import time
 
@@ -27,7 +27,8 @@ async def core_bit_exact(dut):
     await tb.reset()
     start_ns = get_sim_time("ns")
     t0 = time.perf_counter()
-    words = [{"channel": int(c), "sample": int(v)} for c, v in zip(channels, codes, strict=True)]
+    name = tb.config.spec.inputs[0][0]
+    words = [{"channel": int(c), name: int(v)} for c, v in zip(channels, codes, strict=True)]
     await with_timeout(pump(dut.clk, tb.source, tb.sink, words), 100 * n * 25 + 1000, "ns")
     wall = time.perf_counter() - t0
     cycles = (get_sim_time("ns") - start_ns) / 20

@@ -1,0 +1,35 @@
+"""Stream payloads of every core, derived from its filter's spec: inputs, outputs, channel field."""
+
+from __future__ import annotations
+
+from amaranth import signed, unsigned
+from amaranth.lib import data
+
+from kfpga.ads8364 import CODE_FORMAT
+
+__all__ = ["channel_bits", "input_layout", "output_layout"]
+
+
+def channel_bits(channels):
+    """Bits of the channel field: as many as ``channels`` need, at least one.
+
+    One channel needs none, but a zero-width field becomes a ``wire [-1:0]`` in Verilog, which
+    Verilog-2001 tools reject; one bit (always 0) is the narrowest legal field.
+    """
+    return max(1, (channels - 1).bit_length())
+
+
+def input_layout(spec, channels):
+    """``channel`` and one signed 16-bit field per input of the filter (``y`` for one input)."""
+    fields = {"channel": unsigned(channel_bits(channels))}
+    fields.update({name: signed(CODE_FORMAT.width) for name, _ in spec.inputs})
+    return data.StructLayout(fields)
+
+
+def output_layout(config, channels):
+    """``channel``, every output field in its point's format, and the sample's ``overflow`` flag."""
+    spec, f = config.spec, config.formats
+    fields = {"channel": unsigned(channel_bits(channels))}
+    fields.update({o.name: signed(f[o.point].width) for o in spec.outputs})
+    fields["overflow"] = 1
+    return data.StructLayout(fields)

@@ -1,0 +1,236 @@
+"""The bit-accurate model of any registered filter: the integers its RTL core computes.
+
+:class:`FixedModel` runs a variant's update function (``kfpga/spec.py``), traced once per config
+into a compiled sample loop (``kfpga/compiled.py``): the scalar form for one channel, the numpy
+form for a batch of channels. :meth:`FixedModel.run_ops` runs the same update through
+:class:`~kfpga.ops.IntOps` directly, sample by sample, and :meth:`FixedModel.run_exact` through
+exact rationals (:class:`~kfpga.ops.FractionOps`); the tests hold all of them equal.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import MappingProxyType
+
+import numpy as np
+
+from kfpga.ads8364 import CODE_FORMAT
+from kfpga.compiled import compile_stage
+from kfpga.config import FilterConfig
+from kfpga.ops import FractionOps, IntOps
+
+__all__ = ["FixedModel", "ModelState", "ModelResult"]
+
+
+@dataclass(frozen=True)
+class ModelState:
+    """The registers of one channel (ints) or of a batch (int64 arrays), and the sticky flag."""
+
+    values: MappingProxyType
+    sticky: object = False
+
+    def __getattr__(self, name):
+        try:
+            return self.__dict__["values"][name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+
+@dataclass(frozen=True)
+class ModelResult:
+    """Raw outputs (int64 arrays shaped like the input), flags and the state after the last sample.
+
+    ``outputs`` maps each output field to its raw integers, in its point's format;
+    ``overflow`` is the per-sample flag, ``sticky`` its running OR (from the state's sticky
+    flag on), and ``overflow_sites`` the per-sample flag of each write that can overflow.
+    Output fields also read as attributes (``result.x1``).
+    """
+
+    outputs: MappingProxyType
+    overflow: np.ndarray
+    sticky: np.ndarray
+    state: ModelState
+    overflow_sites: MappingProxyType
+
+    def __getattr__(self, name):
+        try:
+            return self.__dict__["outputs"][name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+
+class FixedModel:
+    """The bit-accurate filter of one variant for one config.
+
+    Parameters
+    ----------
+    config:
+        The :class:`~kfpga.config.FilterConfig` (default: the paper's filter, default formats).
+    variant:
+        One of the filter's variants (default: its first).
+    """
+
+    def __init__(self, config=None, *, variant=None):
+        self.config = FilterConfig() if config is None else config
+        self.spec = self.config.spec
+        self.variant = self.spec.default_variant if variant is None else variant
+        self.config.require_variant(self.variant)
+        self._v = self.spec.variants[self.variant]
+        self.inputs = tuple(name for name, _ in self.spec.inputs)
+        self.outputs = self.spec.output_names
+        self.state_names = tuple(name for name, _ in self._v.state)
+        self.reset = self.config.reset_state(self.variant)
+        self.constants = self.config.constants(self.variant)
+        self._kernels = {}
+
+    # -- compiled loops --------------------------------------------------------------------
+    def kernel(self, vector=False):
+        """The compiled loop (see :func:`kfpga.compiled.compile_stage`); built on first use."""
+        if vector not in self._kernels:
+            self._kernels[vector] = compile_stage(
+                self._v.update, self.config.formats, constants=self.constants, state=self._v.state,
+                inputs=tuple((name, CODE_FORMAT) for name in self.inputs), outputs=self.outputs, vector=vector)
+        return self._kernels[vector]
+
+    def initial_state(self, batch_shape=()):
+        """The state after reset, for one channel or a batch."""
+        if batch_shape == ():
+            return ModelState(MappingProxyType(dict(self.reset)), False)
+        values = {n: np.full(batch_shape, v, dtype=np.int64) for n, v in self.reset.items()}
+        return ModelState(MappingProxyType(values), np.zeros(batch_shape, dtype=bool))
+
+    def _codes(self, y):
+        """The input codes as ``{input name: int64 array}``, checked."""
+        if not isinstance(y, dict):
+            if len(self.inputs) != 1:
+                raise TypeError(f"y must map each input ({', '.join(self.inputs)}) to its codes, not {type(y).__name__}")
+            y = {self.inputs[0]: y}
+        if set(y) != set(self.inputs):
+            raise ValueError(f"y must give the inputs {', '.join(self.inputs)}, not {', '.join(y)}")
+        out = {}
+        for name in self.inputs:
+            a = np.asarray(y[name])
+            if a.dtype.kind not in "iu":
+                raise TypeError(f"{name} must hold integer ADC codes, not {a.dtype}")
+            if a.size and (a.min() < CODE_FORMAT.min_raw or a.max() > CODE_FORMAT.max_raw):
+                raise ValueError(f"{name} must be within the signed 16-bit ADC range "
+                                 f"[{CODE_FORMAT.min_raw}, {CODE_FORMAT.max_raw}]")
+            out[name] = a.astype(np.int64)
+        shapes = {a.shape for a in out.values()}
+        if len(shapes) != 1:
+            raise ValueError(f"the inputs must have one shape, not {', '.join(map(str, shapes))}")
+        return out
+
+    def run(self, y, state=None):
+        """Filter raw ADC codes ``y`` (shape ``(n,)``, or ``(..., n)`` for a batch; time last).
+
+        ``y`` is an array for a one-input filter, else ``{input name: array}``. ``state``
+        continues a previous run (its :attr:`ModelResult.state`); by default every channel
+        starts from the reset state. Nothing passed in is changed.
+        """
+        codes = self._codes(y)
+        first = next(iter(codes.values()))
+        n = first.shape[-1]
+        batch = first.shape[:-1]
+        state = self.initial_state(batch) if state is None else state
+        regs = [state.values[name] for name in self.state_names]
+        sticky0 = np.asarray(state.sticky, dtype=bool)
+        if first.ndim == 1:
+            k = self.kernel(False)
+            outs = [[0] * n for _ in self.outputs]
+            sites = [[] for _ in k.sites]
+            columns = [codes[name].tolist() for name in self.inputs]
+            ys = columns[0] if len(columns) == 1 else list(zip(*columns, strict=True))
+            final = k.function(ys, *regs, *outs, *(s.append for s in sites))
+            arrays = [np.array(o, dtype=np.int64) for o in outs]
+            flags = []
+            for hits in sites:
+                f = np.zeros(n, dtype=bool)
+                f[hits] = True
+                flags.append(f)
+        else:
+            # time first while running: each step then writes contiguous rows
+            k = self.kernel(True)
+            arrays = [np.empty((n, *batch), dtype=np.int64) for _ in self.outputs]
+            flags = [np.zeros((n, *batch), dtype=bool) for _ in k.sites]
+            ys = [np.moveaxis(codes[name], -1, 0) for name in self.inputs]
+            final = k.function(ys, *(np.asarray(r, dtype=np.int64) for r in regs), *arrays, *flags)
+        overflow = np.zeros((n, *batch), dtype=bool)
+        for f in flags:
+            overflow |= f
+        sticky = np.logical_or.accumulate(overflow, axis=0) | sticky0 if n else overflow.copy()
+        end = ModelState(MappingProxyType(dict(zip(self.state_names, final, strict=True))),
+                         sticky[-1].copy() if n else sticky0)
+        site_flags = {}
+        for name, f in zip(k.sites, flags, strict=True):
+            site_flags[name] = site_flags[name] | f if name in site_flags else f
+        if first.ndim > 1:
+            arrays = [np.moveaxis(a, 0, -1) for a in arrays]
+            overflow, sticky = np.moveaxis(overflow, 0, -1), np.moveaxis(sticky, 0, -1)
+            site_flags = {name: np.moveaxis(f, 0, -1) for name, f in site_flags.items()}
+        return ModelResult(MappingProxyType(dict(zip(self.outputs, arrays, strict=True))), overflow, sticky, end,
+                           MappingProxyType(site_flags))
+
+    def run_ops(self, y, state=None):
+        """The same as :meth:`run`, through :class:`~kfpga.ops.IntOps` one sample at a time (slow)."""
+        return self._step(IntOps, lambda ops, v: v.raw, y, state)
+
+    def run_exact(self, y):
+        """The exact-rational spec (:class:`~kfpga.ops.FractionOps`), one channel, from reset.
+
+        Every value is a ``Fraction`` written once into its point's format: no shift, alignment
+        or rounding code is shared with :meth:`run`, only the equations. Very slow; for tests.
+        """
+        return self._step(FractionOps, lambda ops, v: ops.raw_of(v), y, None)
+
+    def _step(self, backend, raw_of, y, state):
+        codes = self._codes(y)
+        first = next(iter(codes.values()))
+        state = self.initial_state(first.shape[:-1]) if state is None else state
+        points = dict(self._v.state)
+        x = dict(state.values)
+        outs = {name: [] for name in self.outputs}
+        overflow = []
+        for t in range(first.shape[-1]):
+            ops = backend(self.config.formats)
+            k = ops.constants(self.constants)
+            xs = {name: ops.input(x[name], points[name], name) for name in self.state_names}
+            u = {name: ops.input(codes[name][..., t], CODE_FORMAT, name) for name in self.inputs}
+            nxt, o = self._v.update(ops, k, xs, u)
+            x = {name: raw_of(ops, nxt[name]) for name in self.state_names}
+            for name in self.outputs:
+                outs[name].append(raw_of(ops, o[name]))
+            overflow.append(ops.overflow())
+        arrays = {name: np.moveaxis(np.array(v, dtype=np.int64), 0, -1) for name, v in outs.items()}
+        ovf = np.moveaxis(np.array(overflow, dtype=bool), 0, -1)
+        sticky = np.logical_or.accumulate(ovf, axis=-1) | np.asarray(state.sticky, dtype=bool)[..., None]
+        end = ModelState(MappingProxyType(x), sticky[..., -1].copy())
+        return ModelResult(MappingProxyType(arrays), ovf, sticky, end, MappingProxyType({}))
+
+    def run_channels(self, y, channel, states=None):
+        """Filter an interleaved multi-channel stream: each channel keeps its own state.
+
+        Returns ``(outputs, overflow, states)``: ``{field: raw array}`` and the per-sample flag
+        in input order, and a new ``{channel: ModelState}`` (``states`` is not changed).
+        """
+        codes = self._codes(y)
+        channel = np.asarray(channel)
+        n = len(channel)
+        states = dict(states or {})
+        outs = {name: np.zeros(n, dtype=np.int64) for name in self.outputs}
+        overflow = np.zeros(n, dtype=bool)
+        for ch in np.unique(channel):
+            idx = np.flatnonzero(channel == ch)
+            res = self.run({name: a[idx] for name, a in codes.items()}, states.get(int(ch)))
+            states[int(ch)] = res.state
+            for name in self.outputs:
+                outs[name][idx] = res.outputs[name]
+            overflow[idx] = res.overflow
+        return outs, overflow, states
+
+    def output_format(self, name):
+        return self.config.formats[self.spec.output(name).point]
+
+    def to_float(self, result):
+        """``{output: float array}`` of a result, in input units."""
+        return {name: self.output_format(name).to_float(result.outputs[name]) for name in self.outputs}

@@ -1,0 +1,530 @@
+"""The operations layer: a filter's arithmetic written once, run by several backends.
+
+An update stage is a plain Python function over an ``ops`` object::
+
+    def predict(ops, x1, v):
+        return ops.rq(ops.add(x1, v), "xl1")          # xl1 = x1 + v
+
+Values are :class:`Fx`: a backend payload and its binary point (``frac``: the payload stands
+for ``raw * 2**-frac``). ``add``, ``sub``, ``neg``, ``mul`` and ``shift`` are exact; ``rq``
+writes a value into the format of a quantisation point (the one place where bits are dropped,
+with the point's rounding and overflow rules, raising an overflow flag); ``div`` is the
+restoring divider of the time-varying filters. The rules every backend shares live here, in
+:class:`Ops`, once:
+
+* a sum is aligned to the larger fraction count of its terms (the other term shifted left);
+* a product has the sum of the fraction counts;
+* a product by a constant 0, +-1 or +-2**k is no multiplier: a zero, the value, or a shift.
+
+Backends (this module; the Amaranth one is ``hw/arith.py``, the compiled fast path
+``kfpga/compiled.py``):
+
+==================  ==========================================================================
+:class:`IntOps`     the bit-accurate integers, on Python ints or numpy int64 arrays
+:class:`FloatOps`   float64 values with real constants and no rounding; records every point's
+                    largest magnitude (the range analysis)
+:class:`WidthOps`   the exact width of every intermediate as the RTL builds it, multiplier
+                    count and operand widths, the int64 bound
+:class:`FractionOps`  exact rationals rounded once per point: the spec the integer model is
+                    tested against, sharing no shift or rounding code with it
+==================  ==========================================================================
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from fractions import Fraction
+
+import numpy as np
+
+from kfpga.fixed import INT64_SAFE_BITS, Overflow, QFormat, Rounding, requantize, to_raw
+
+__all__ = ["Fx", "Ops", "IntOps", "FloatOps", "WidthOps", "FractionOps", "Intermediate", "divider_shift",
+           "quantise_fraction", "quotient_bits", "divide"]
+
+
+@dataclass(frozen=True, slots=True)
+class Fx:
+    """A backend value ``raw`` standing for ``raw * 2**-frac``.
+
+    ``const`` is the raw integer when the value is a constant known when the stage is built
+    (every backend sees the same integer, so every backend makes the same multiplier choices);
+    ``fmt`` is the format the value was written into (``None`` for exact intermediates).
+    """
+
+    raw: object
+    frac: int
+    const: int | None = None
+    fmt: QFormat | None = None
+    name: str | None = None
+
+
+def divider_shift(num_frac, den_frac, quotient_frac):
+    """Left shift of the dividend so that ``floor(|num| << shift / den)`` has ``quotient_frac`` bits."""
+    return quotient_frac + den_frac - num_frac
+
+
+def quotient_bits(fmt):
+    """Magnitude bits of the divider's quotient written into ``fmt`` (its sign comes back after)."""
+    return fmt.width - 1
+
+
+def _power_of_two(c):
+    """``k`` if ``|c| == 2**k``, else ``None``."""
+    c = abs(c)
+    return c.bit_length() - 1 if c and not c & (c - 1) else None
+
+
+class Ops:
+    """The arithmetic rules shared by every backend; a backend supplies the primitives.
+
+    Parameters
+    ----------
+    formats:
+        ``{point name: QFormat}`` of the config being built.
+    """
+
+    #: The payload is the real value itself (float, Fraction): moving the binary point
+    #: rescales it, aligning a sum does not.
+    value_payload = False
+
+    def __init__(self, formats):
+        self.formats = formats
+        self.flags = []  # (name, flag payload) of every rq and div, in order
+
+    # -- values -------------------------------------------------------------------------
+    def fmt(self, point):
+        """The format of ``point`` (or ``point`` itself when it is a :class:`QFormat`)."""
+        if isinstance(point, QFormat):
+            return point
+        try:
+            return self.formats[point]
+        except KeyError:
+            raise KeyError(f"no format for quantisation point {point!r}") from None
+
+    def input(self, raw, point, name=None):
+        """A value held in the format of ``point`` (a register, a port)."""
+        fmt = self.fmt(point)
+        return Fx(self._input(raw, fmt, name or _label(point)), fmt.frac_bits, None, fmt, name or _label(point))
+
+    def const(self, value, point, name=None):
+        """The real ``value`` quantised into the format of ``point`` (at build time)."""
+        fmt = self.fmt(point)
+        raw, overflowed = to_raw(value, fmt)
+        if overflowed:
+            raise ValueError(f"the constant {name or _label(point)} = {value!r} does not fit {fmt}")
+        raw = int(raw)
+        return Fx(self._const(raw, fmt, value, name or _label(point)), fmt.frac_bits, raw, fmt, name or _label(point))
+
+    def constants(self, constants):
+        """A variant's constants (``{name: (value, point) | structural}``) as values of this backend;
+        structural entries pass through unchanged."""
+        return {n: self.const(c[0], c[1], n) if isinstance(c, tuple) else c for n, c in constants.items()}
+
+    # -- exact arithmetic ------------------------------------------------------------------
+    def _aligned(self, a, b):
+        """The payloads of ``a`` and ``b`` at a common binary point, and that point."""
+        frac = max(a.frac, b.frac)
+        return self._to_frac(a, frac), self._to_frac(b, frac), frac
+
+    def _to_frac(self, a, frac):
+        if a.frac == frac or self.value_payload:
+            return a.raw
+        return self._shl(a.raw, frac - a.frac)
+
+    def add(self, a, b):
+        """``a + b``, exact."""
+        ra, rb, frac = self._aligned(a, b)
+        return Fx(self._add(ra, rb), frac, _fold(a, b, frac, lambda x, y: x + y))
+
+    def sub(self, a, b):
+        """``a - b``, exact."""
+        ra, rb, frac = self._aligned(a, b)
+        return Fx(self._sub(ra, rb), frac, _fold(a, b, frac, lambda x, y: x - y))
+
+    def neg(self, a):
+        """``-a``, exact."""
+        return Fx(self._neg(a.raw), a.frac, None if a.const is None else -a.const)
+
+    def mul(self, a, b):
+        """``a * b``, exact; a constant 0, +-1 or +-2**k factor costs no multiplier."""
+        frac = a.frac + b.frac
+        if self.value_payload:
+            return Fx(self._mul(a.raw, b.raw), frac)
+        if b.const is not None and a.const is None:
+            a, b = b, a
+        if a.const is not None and b.const is not None:
+            return Fx(self._mul(a.raw, b.raw), frac, a.const * b.const)
+        if a.const is not None:
+            c = a.const
+            if c == 0:
+                return Fx(self._zero(), frac, 0)
+            k = _power_of_two(c)
+            if k is not None:
+                raw = self._shl(b.raw, k) if k else b.raw
+                return Fx(self._neg(raw) if c < 0 else raw, frac)
+        return Fx(self._mul(a.raw, b.raw), frac)
+
+    def shift(self, a, n):
+        """``a * 2**n``: the binary point moves, no bit changes (free in hardware)."""
+        raw = self._scale(a.raw, n) if self.value_payload else a.raw
+        return Fx(raw, a.frac - n, a.const, None)
+
+    # -- quantisation ------------------------------------------------------------------------
+    def rq(self, a, point, name=None):
+        """Write ``a`` into the format of ``point``: its rounding, its overflow rule, a flag."""
+        fmt = self.fmt(point)
+        name = name or _label(point)
+        raw, flag = self._rq(a.raw, a.frac, fmt, name)
+        self.flags.append((name, flag))
+        return Fx(raw, fmt.frac_bits, None, fmt, name)
+
+    def div(self, num, den, point, name=None):
+        """The restoring divider: ``|num| / den`` truncated to the fraction bits of ``point``,
+        saturated to its largest value when it does not fit or ``den <= 0``, given the sign of
+        ``num`` (truncation toward zero)."""
+        fmt = self.fmt(point)
+        name = name or _label(point)
+        shift = divider_shift(num.frac, den.frac, fmt.frac_bits)
+        if shift < 0:
+            raise ValueError(
+                f"the division {name} = {num.name or 'num'} / {den.name or 'den'} needs "
+                f"{point_name(point)}.frac_bits + {den.name or 'den'}.frac_bits - {num.name or 'num'}.frac_bits >= 0 "
+                f"(it is {shift}) so that the dividend is an exact integer")
+        raw, flag = self._div(num.raw, den.raw, shift, fmt, name)
+        self.flags.append((name, flag))
+        return Fx(raw, fmt.frac_bits, None, fmt, name)
+
+    def overflow(self):
+        """OR of every flag raised so far."""
+        return self._any([f for _, f in self.flags])
+
+    # -- backend primitives ------------------------------------------------------------------
+    def _input(self, raw, fmt, name):
+        return raw
+
+    def _const(self, raw, fmt, value, name):
+        return raw
+
+    def _zero(self):
+        return 0
+
+    def _scale(self, raw, n):
+        """``raw * 2**n`` (value payloads only)."""
+        raise NotImplementedError
+
+    def _shl(self, raw, n):
+        return raw << n
+
+    def _add(self, x, y):
+        return x + y
+
+    def _sub(self, x, y):
+        return x - y
+
+    def _neg(self, x):
+        return -x
+
+    def _mul(self, x, y):
+        return x * y
+
+    def _rq(self, raw, src_frac, fmt, name):
+        raise NotImplementedError
+
+    def _div(self, num, den, shift, fmt, name):
+        raise NotImplementedError
+
+    def _any(self, flags):
+        out = False
+        for f in flags:
+            out = out | f
+        return out
+
+
+def _label(point):
+    return str(point) if isinstance(point, QFormat) else point
+
+
+def point_name(point):
+    return f"formats.{point}" if isinstance(point, str) else str(point)
+
+
+def _fold(a, b, frac, op):
+    if a.const is None or b.const is None:
+        return None
+    return op(a.const << (frac - a.frac), b.const << (frac - b.frac))
+
+
+# -- bit-accurate integers ---------------------------------------------------------------------
+
+
+def divide(num, den, shift, quotient_bits):
+    """The restoring divider on integers: ``(quotient, overflowed)``; ints or int64 arrays.
+
+    ``floor(|num| * 2**shift / den)`` with the sign of ``num``; ``2**quotient_bits - 1`` (and the
+    flag) when that does not fit in ``quotient_bits`` bits or ``den <= 0``.
+    """
+    limit = (1 << quotient_bits) - 1
+    if isinstance(num, np.ndarray) or isinstance(den, np.ndarray):
+        num, den = np.broadcast_arrays(np.asarray(num, dtype=np.int64), np.asarray(den, dtype=np.int64))
+        mag = np.abs(num) << shift
+        bad = (den <= 0) | (mag >= (np.maximum(den, 1) << quotient_bits))
+        quo = np.where(bad, limit, mag // np.maximum(den, 1))
+        return np.where(num < 0, -quo, quo), bad
+    mag = abs(num) << shift
+    if den <= 0 or mag >= den << quotient_bits:
+        quo, bad = limit, True
+    else:
+        quo, bad = mag // den, False
+    return (-quo if num < 0 else quo), bad
+
+
+class IntOps(Ops):
+    """The bit-accurate integers: payloads are Python ints (one channel) or int64 arrays (a batch).
+
+    Every write goes through :func:`kfpga.fixed.requantize`; this backend is the plain,
+    unoptimised statement of the integer model (``kfpga/compiled.py`` is its fast form, and
+    the tests hold the two equal).
+    """
+
+    def _rq(self, raw, src_frac, fmt, name):
+        return requantize(raw, src_frac, fmt)
+
+    def _div(self, num, den, shift, fmt, name):
+        return divide(num, den, shift, quotient_bits(fmt))
+
+
+# -- float: the real-valued filter and its ranges ----------------------------------------------
+
+
+class FloatOps(Ops):
+    """Float64 arithmetic with real (unquantised) constants; ``rq`` only records the magnitude.
+
+    Payloads are floats or float arrays (a batch of stimuli). :attr:`ranges` maps each point
+    (and each named value) to the largest magnitude written into it, constants included.
+    """
+
+    value_payload = True
+
+    def __init__(self, formats):
+        super().__init__(formats)
+        self._seen = {}
+
+    def record(self, name, value):
+        self._seen.setdefault(name, []).append(value)
+
+    def input(self, raw, point, name=None):
+        return Fx(np.asarray(raw, dtype=np.float64), 0, None, None, name or _label(point))
+
+    def const(self, value, point, name=None):
+        fmt = self.formats.get(point) if isinstance(point, str) and self.formats else None
+        fmt_raw = int(to_raw(value, fmt)[0]) if fmt is not None else None
+        for key in {_label(point), name or _label(point)}:
+            self.record(key, float(value))
+        return Fx(float(value), 0, fmt_raw, fmt, name or _label(point))
+
+    def rq(self, a, point, name=None):
+        self.record(_label(point), a.raw)
+        if name and name != _label(point):
+            self.record(name, a.raw)
+        return Fx(a.raw, 0, None, None, name or _label(point))
+
+    def div(self, num, den, point, name=None):
+        return self.rq(Fx(num.raw / den.raw, 0), point, name)
+
+    def _zero(self):
+        return 0.0
+
+    def _scale(self, raw, n):
+        return raw * 2.0**n
+
+    def overflow(self):
+        return False
+
+    @property
+    def ranges(self):
+        """``{name: largest magnitude}`` of everything recorded."""
+        return {name: float(max(np.max(np.abs(v)) for v in values)) for name, values in self._seen.items()}
+
+
+# -- widths, multipliers, bounds ---------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Intermediate:
+    """One exact intermediate as the RTL builds it."""
+
+    text: str  # the expression, in point and constant names
+    width: int  # signed width in bits (Amaranth's rules: a + b is one bit wider, a * b the sum)
+    points: frozenset  # quantisation points whose formats set it
+    kind: str  # "sum", "product", "shift", "dividend", "comparison"
+    into: str | None = None  # the point it is written to, when known
+
+
+@dataclass
+class _W:
+    width: int
+    text: str
+    points: frozenset
+
+
+@dataclass
+class WidthReport:
+    """What :class:`WidthOps` found in a stage."""
+
+    intermediates: list = field(default_factory=list)
+    multipliers: list = field(default_factory=list)  # (text, width a, width b, points a, points b)
+    writes: list = field(default_factory=list)  # (point, source width, format)
+
+    @property
+    def multiplier_count(self):
+        return len(self.multipliers)
+
+    def widest(self):
+        return max(self.intermediates, key=lambda i: i.width, default=None)
+
+    def too_wide(self, bits=INT64_SAFE_BITS):
+        """The first intermediate wider than ``bits`` (the int64 model holds ``bits`` exactly)."""
+        return next((i for i in self.intermediates if i.width > bits), None)
+
+
+class WidthOps(Ops):
+    """Exact widths of every intermediate, the multipliers and their operand widths.
+
+    Widths follow Amaranth's rules, which are the RTL's: ``a + b`` and ``a - b`` are one bit
+    wider than the wider (aligned) term, ``-a`` one bit wider than ``a``, ``a * b`` as wide as
+    both together, ``a << n`` ``n`` bits wider; a constant is as wide as its format.
+    """
+
+    def __init__(self, formats):
+        super().__init__(formats)
+        self.report = WidthReport()
+
+    def _node(self, width, text, points, kind):
+        self.report.intermediates.append(Intermediate(text, width, frozenset(points), kind))
+        return _W(width, text, frozenset(points))
+
+    def input(self, raw, point, name=None):
+        value = super().input(raw, point, name)
+        value.raw.points = value.raw.points | {_label(point)}
+        return value
+
+    def const(self, value, point, name=None):
+        out = super().const(value, point, name)
+        out.raw.points = out.raw.points | {_label(point)}
+        return out
+
+    def _input(self, raw, fmt, name):
+        return _W(fmt.width, name, frozenset([name]))
+
+    def _const(self, raw, fmt, value, name):
+        return _W(fmt.width, name, frozenset([name]))
+
+    def _zero(self):
+        return _W(1, "0", frozenset())
+
+    def _shl(self, raw, n):
+        return _W(raw.width + n, raw.text, raw.points)
+
+    def _add(self, x, y):
+        return self._node(max(x.width, y.width) + 1, f"{x.text} + {y.text}", x.points | y.points, "sum")
+
+    def _sub(self, x, y):
+        return self._node(max(x.width, y.width) + 1, f"{x.text} - {_paren(y.text)}", x.points | y.points, "sum")
+
+    def _neg(self, x):
+        return self._node(x.width + 1, f"-{_paren(x.text)}", x.points, "sum")
+
+    def _mul(self, x, y):
+        self.report.multipliers.append((f"{_paren(x.text)}*{_paren(y.text)}", x.width, y.width, x.points, y.points))
+        return self._node(x.width + y.width, f"{_paren(x.text)}*{_paren(y.text)}", x.points | y.points, "product")
+
+    def _rq(self, raw, src_frac, fmt, name):
+        self.report.writes.append((name, raw.width, fmt))
+        if self.report.intermediates and self.report.intermediates[-1].text == raw.text:
+            last = self.report.intermediates[-1]
+            self.report.intermediates[-1] = Intermediate(last.text, last.width, last.points, last.kind, name)
+        return _W(fmt.width, name, frozenset([name])), False
+
+    def _div(self, num, den, shift, fmt, name):
+        qbits = quotient_bits(fmt)
+        points = num.points | den.points | {name}
+        # |num| << shift is compared with den << quotient_bits (kfpga.ops.divide)
+        self._node(num.width + shift + 1, f"|{num.text}| << {shift}", points, "dividend")
+        self._node(den.width + qbits, f"{den.text} << {qbits}", points, "comparison")
+        return _W(fmt.width, name, frozenset([name])), False
+
+    def overflow(self):
+        return False
+
+
+def _paren(text):
+    return f"({text})" if any(c in text for c in " +-") else text
+
+
+# -- exact rationals: the spec ----------------------------------------------------------------------
+
+
+def quantise_fraction(value, fmt):
+    """An exact rational written into ``fmt``: ``(raw, overflowed)`` by the format's rules."""
+    scaled = Fraction(value) * (1 << fmt.frac_bits)
+    if fmt.rounding is Rounding.HALF_UP:
+        raw = math.floor(scaled + Fraction(1, 2))
+    else:
+        raw = math.floor(scaled)
+    if fmt.min_raw <= raw <= fmt.max_raw:
+        return raw, False
+    if fmt.overflow is Overflow.SATURATE:
+        return (fmt.max_raw if raw > fmt.max_raw else fmt.min_raw), True
+    return (raw - fmt.min_raw) % (1 << fmt.width) + fmt.min_raw, True
+
+
+class FractionOps(Ops):
+    """Exact rational values (``Fraction``), each written once into its point's format.
+
+    The payload is the real value itself, so no alignment shift is ever formed; rounding is
+    ``floor(value * 2**frac)`` (plus one half for ``half_up``) and the division is the exact
+    quotient truncated toward zero. This shares nothing with :class:`IntOps` but the equations,
+    which makes it the spec the integer model is tested against.
+    """
+
+    value_payload = True
+
+    def input(self, raw, point, name=None):
+        fmt = self.fmt(point)
+        return Fx(Fraction(int(raw), 1 << fmt.frac_bits), fmt.frac_bits, None, fmt, name or _label(point))
+
+    def const(self, value, point, name=None):
+        fmt = self.fmt(point)
+        raw, overflowed = quantise_fraction(Fraction(value), fmt)
+        if overflowed:
+            raise ValueError(f"the constant {name or _label(point)} = {value!r} does not fit {fmt}")
+        return Fx(Fraction(raw, 1 << fmt.frac_bits), fmt.frac_bits, raw, fmt, name or _label(point))
+
+    def _zero(self):
+        return Fraction(0)
+
+    def _scale(self, raw, n):
+        return raw * Fraction(2) ** n
+
+    def _rq(self, value, src_frac, fmt, name):
+        raw, flag = quantise_fraction(value, fmt)
+        return Fraction(raw, 1 << fmt.frac_bits), flag
+
+    def _div(self, num, den, shift, fmt, name):
+        limit = fmt.max_raw
+        if den <= 0:
+            return Fraction(limit if num >= 0 else -limit, 1 << fmt.frac_bits), True
+        exact = abs(num) / den * (1 << fmt.frac_bits)
+        if exact >= limit + 1:
+            return Fraction(limit if num >= 0 else -limit, 1 << fmt.frac_bits), True
+        quo = math.floor(exact)
+        return Fraction(-quo if num < 0 else quo, 1 << fmt.frac_bits), False
+
+    def raw_of(self, a):
+        """The integer a value stands for in its format (``a`` must come from ``rq``/``div``)."""
+        scaled = a.raw * (1 << a.frac)
+        if scaled.denominator != 1:
+            raise ValueError(f"{a.name} is not an integer in its format")
+        return int(scaled)

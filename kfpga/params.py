@@ -1,0 +1,52 @@
+"""Checks shared by the filters' parameter dataclasses: ``TypeError`` for a wrong type,
+``ValueError`` for a wrong value, each message starting with the field's name."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["number", "vector", "matrix"]
+
+
+def number(name, value, *, minimum=None, strict=False):
+    """A finite real number, optionally ``>= minimum`` (``> minimum`` with ``strict``)."""
+    if not isinstance(value, int | float | np.integer | np.floating) or isinstance(value, bool | np.bool_):
+        raise TypeError(f"{name} must be a number, not {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, not {value!r}")
+    if minimum is not None and (value <= minimum if strict else value < minimum):
+        raise ValueError(f"{name} must be {'>' if strict else '>='} {minimum:g}, not {value!r}")
+    return value
+
+
+def vector(name, value, length):
+    """A tuple of ``length`` finite numbers."""
+    try:
+        items = list(value)
+    except TypeError:
+        raise TypeError(f"{name} must be a list of {length} numbers, not {value!r}") from None
+    if len(items) != length:
+        raise ValueError(f"{name} must have {length} entries, not {len(items)}: {value!r}")
+    return tuple(number(f"{name}[{i}]", v) for i, v in enumerate(items))
+
+
+def matrix(name, value, rows, cols, *, symmetric=False, positive_definite=False):
+    """A ``rows x cols`` tuple of tuples of finite numbers, optionally symmetric positive definite."""
+    try:
+        lines = [list(r) for r in value]
+    except TypeError:
+        raise TypeError(f"{name} must be a {rows}x{cols} matrix (a list of rows), not {value!r}") from None
+    if len(lines) != rows or any(len(r) != cols for r in lines):
+        raise ValueError(f"{name} must be a {rows}x{cols} matrix, not {value!r}")
+    out = tuple(tuple(number(f"{name}[{i}][{j}]", v) for j, v in enumerate(r)) for i, r in enumerate(lines))
+    a = np.array(out)
+    if symmetric and not np.array_equal(a, a.T):
+        raise ValueError(f"{name} must be symmetric, not {value!r}")
+    if positive_definite:
+        eig = np.linalg.eigvalsh(a)
+        if not np.all(eig > 0):
+            raise ValueError(f"{name} must be positive definite, not {value!r} (eigenvalues {', '.join(f'{e:.4g}' for e in eig)})")
+    return out

@@ -1,0 +1,182 @@
+"""What a filter is: the description every layer (model, RTL, CLI, benches, tests) reads.
+
+A filter is a :class:`FilterSpec` in the registry (``kfpga/registry.py``). Its arithmetic is
+written once, as stage functions over an ``ops`` object (``kfpga/ops.py``); the spec names the
+quantisation points those functions write, the state they carry, the outputs they give, and
+the pieces that cannot be derived: the float reference, the default-format rules, the core.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+__all__ = ["Point", "Output", "Variant", "FilterSpec"]
+
+
+@dataclass(frozen=True)
+class Point:
+    """A quantisation point: one format shared by every value written into it.
+
+    Parameters
+    ----------
+    name, description:
+        The point's name (``formats.<name>`` in a config) and what it holds.
+    role:
+        ``"register"`` (a state or output register: the analysed range plus a guard bit, and
+        ``frac`` fraction bits) or ``"operand"`` (feeds an embedded multiplier: as many
+        fraction bits as an 18-bit word leaves).
+    variants:
+        The variants that write it (empty: all).
+    frac:
+        Fraction bits of a register by default: an integer, or the name of a point to copy
+        them from (``None``: the config's state fraction bits).
+    same_as:
+        The point shares this point's format (the range check covers both).
+    constant:
+        It holds only constants: no guard bit.
+    """
+
+    name: str
+    description: str
+    role: str = "register"
+    variants: tuple = ()
+    frac: int | str | None = None
+    same_as: str | None = None
+    constant: bool = False
+
+    def __post_init__(self):
+        if self.role not in ("register", "operand"):
+            raise ValueError(f"role must be 'register' or 'operand', not {self.role!r}")
+
+    @property
+    def operand(self):
+        return self.role == "operand"
+
+
+@dataclass(frozen=True)
+class Output:
+    """An output field: a CSV column, a payload field of the core, a scoreboard field."""
+
+    name: str
+    point: str
+    description: str
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One form of a filter's update, run by the model and built by the core.
+
+    Parameters
+    ----------
+    name, summary:
+        The ``--variant`` name and a line for ``--help``.
+    state:
+        ``((name, point), ...)``: the registers the update carries from one sample to the
+        next, each held in the format of its point.
+    constants:
+        ``constants(params) -> {name: (real value, point) | structural value}``: each pair is
+        quantised once into the point's format, the same integers in the model and the RTL;
+        other entries (a shift amount, a flag) reach the update unchanged.
+    initial:
+        ``initial(params) -> {state name: real value}``: the state after reset.
+    update:
+        ``update(ops, k, x, u) -> (x_next, outputs)``: ``k`` the constants, ``x`` the state,
+        ``u`` the inputs, all :class:`~kfpga.ops.Fx`; returns dicts of Fx.
+    """
+
+    name: str
+    summary: str
+    state: tuple
+    constants: Callable
+    initial: Callable
+    update: Callable
+    applies: Callable = field(default=lambda params: None)  # params -> None or why not
+
+
+@dataclass(frozen=True)
+class FilterSpec:
+    """A registered filter (see ``kfpga/registry.py`` and the README's "Add a filter").
+
+    Parameters
+    ----------
+    name, summary, source:
+        ``--filter`` name, one line for ``kfpga filters``, the document it comes from.
+    params:
+        Its parameters: a keyword-only dataclass that validates itself (``TypeError`` for a
+        wrong type, ``ValueError`` for a wrong value). The defaults are the source's.
+    points:
+        Its quantisation points, in datapath order.
+    inputs:
+        ``((name, description), ...)``: the samples of one update, each a 16-bit ADC code.
+    outputs:
+        Its output fields, in order.
+    variants:
+        ``{name: Variant}``; the first is the default.
+    points_for:
+        ``points_for(params) -> names``: the points a config of these parameters has.
+    default_formats:
+        ``default_formats(params, ranges, *, operand_bits, state_frac) -> {point: QFormat}``.
+    ranges:
+        ``ranges(params, stimulus=None) -> {point: largest magnitude}`` from float runs.
+    validate:
+        ``validate(config)``: checks beyond formats and widths (raises ``ConfigError``).
+    reference:
+        ``reference(params, variant, y) -> {output: float array}``: the float filter.
+    core:
+        ``"module:function"`` building the Amaranth core, ``f(config, variant, *, channels)``;
+        imported only when hardware is asked for (the model never imports ``hw/``).
+    goals:
+        ``goals(config, variant) -> {"logic_cells": n, "mul18": n, "lut_levels": n}``.
+    default_output:
+        The output that drives ``out_data`` on the board by default.
+    random_params:
+        ``random_params(rng) -> params``: valid random parameters, for the contract tests'
+        random configs (the formats around them are randomised by the tests).
+    """
+
+    name: str
+    summary: str
+    source: str
+    params: type
+    points: Mapping
+    inputs: tuple
+    outputs: tuple
+    variants: Mapping
+    points_for: Callable
+    default_formats: Callable
+    ranges: Callable
+    validate: Callable
+    reference: Callable
+    core: str
+    goals: Callable
+    default_output: str
+    random_params: Callable
+
+    def __post_init__(self):
+        object.__setattr__(self, "points", MappingProxyType(dict(self.points)))
+        object.__setattr__(self, "variants", MappingProxyType(dict(self.variants)))
+        names = [o.name for o in self.outputs]
+        if self.default_output not in names:
+            raise ValueError(f"default_output must be one of {', '.join(names)}, not {self.default_output!r}")
+
+    @property
+    def default_variant(self):
+        return next(iter(self.variants))
+
+    @property
+    def output_names(self):
+        return tuple(o.name for o in self.outputs)
+
+    def output(self, name):
+        for o in self.outputs:
+            if o.name == name:
+                return o
+        raise KeyError(name)
+
+    def make_core(self, config, variant, *, channels=1):
+        """The Amaranth core of ``variant`` (imports the RTL module on first use)."""
+        module, _, function = self.core.partition(":")
+        return getattr(importlib.import_module(module), function)(config, variant, channels=channels)

@@ -1,0 +1,297 @@
+"""The paper's 2-state Kalman filter (seeds/001, SPEC §1): its equations, once, and its spec.
+
+Both variants run in the datapath's units (``v = T*x2``, ``P' = D P D``, see
+:meth:`~kfpga.model.reference.KalmanParams.scaled`), so T never multiplies inside the loop.
+Every quantity written to a register is an exact sum or product written once into the format
+of its quantisation point (:data:`POINTS`), with that format's rounding and overflow rule.
+The stage functions below are that arithmetic; the bit-accurate model (``kfpga/fixedmodel.py``),
+the RTL cores (``hw/kalman2.py``), the range analysis, the width checks and the exact-rational
+spec all run these same functions.
+
+Steady state (constant gains ``k1 = K1``, ``k2 = T*K2``, rounded into ``gain``)::
+
+    xl1 = [x1 + v]_xl1          e = [y - xl1]_e
+    x1  = [xl1 + k1*e]_x1       v = [v + k2*e]_v          yhat = xl1
+
+Time-varying (SPEC §1 with the paper's two misprints corrected; ``Q' = T^2 Q`` in ``pl``,
+``R`` in ``s``)::
+
+    xl1  = [x1 + v]_xl1
+    pl11 = [p11 + p12 + p21 + p22]_pl    pl12 = [p12 + p22]_pl
+    pl21 = [p21 + p22]_pl                pl22 = [p22 + Q']_pl
+    S    = [pl11 + R]_s
+    K1   = div(pl11, S)                  K2   = div(pl21, S)
+    e    = [y - xl1]_e
+    x1   = [xl1 + K1*e]_x1               v    = [v + K2*e]_v
+    p11  = [pl11 - K1*pl11]_p            p12  = [pl12 - K1*pl12]_p
+    p21  = [pl21 - K2*pl11]_p            p22  = [pl22 - K2*pl12]_p
+
+``div(n, d)`` is the restoring divider (:meth:`kfpga.ops.Ops.div`): ``|n|/d`` truncated to
+``gain.frac_bits``, saturated to ``gain``'s largest value, given the sign of ``n``.
+
+The output ``x2 = v / T`` is ``[v]_x2`` read with the binary point moved by k when ``T = 2**k``
+(a shift), else ``[[v]_vt * (1/T)]_x2`` with ``1/T`` rounded into ``inv_t`` and ``v`` rounded
+into the 18-bit operand ``vt`` first. Any saturation (or wrap) sets the sample's overflow flag.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from kfpga.errors import ConfigError
+from kfpga.fixed import QFormat, Rounding
+from kfpga.formats import register_formats
+from kfpga.model.ranges import float_ranges, full_scale_stimulus
+from kfpga.model.reference import KalmanParams, kalman_decomposed, steady_state, steady_state_gain
+from kfpga.spec import FilterSpec, Output, Point, Variant
+
+__all__ = ["SPEC", "POINTS", "t_exponent", "steady_gain", "predict", "innovation", "correct", "rate",
+           "covariance_predict", "innovation_variance", "gains", "covariance_correct", "steady_update",
+           "full_update"]
+
+VARIANTS = ("steady", "full")
+
+POINTS = {
+    p.name: p
+    for p in (
+        Point("x1", "filtered position x1 (state, output)"),
+        Point("xl1", "predicted position xl1 = x1 + v (output yhat)", same_as="x1"),
+        Point("v", "rate per sample v = T*x2 (state)"),
+        Point("x2", "rate output x2 = v / T"),
+        Point("e", "innovation e = y - xl1", role="operand"),
+        Point("gain", "gains K1, T*K2 (constants, or the divider's quotients)", role="operand"),
+        Point("p", "covariance p11, p12, p21, p22 (state)", variants=("full",), frac="pl"),
+        Point("pl", "predicted covariance pl11..pl22", role="operand", variants=("full",)),
+        Point("s", "innovation covariance S = pl11 + R (divisor)", variants=("full",), frac="pl"),
+        Point("inv_t", "1/T, when T is not a power of two", role="operand", constant=True),
+        Point("vt", "rate operand of x2 = v * (1/T), when T is not a power of two", role="operand"),
+    )
+}
+
+
+def t_exponent(T):
+    """``k`` if ``T == 2**k`` exactly, else ``None``."""
+    mantissa, exponent = math.frexp(T)
+    return exponent - 1 if mantissa == 0.5 else None
+
+
+def steady_gain(params):
+    """Float ``(K1, T*K2)`` of the steady-state filter, in datapath units."""
+    (k1, k2), _ = steady_state_gain(params.T, params.Q, params.R)
+    return k1, k2 * params.T
+
+
+# -- the equations -------------------------------------------------------------------------------
+
+
+def predict(ops, x1, v):
+    """xl1 = x1 + v: the predicted position, also the one-step output prediction yhat."""
+    return ops.rq(ops.add(x1, v), "xl1")
+
+
+def innovation(ops, y, xl1):
+    """e = y - xl1."""
+    return ops.rq(ops.sub(y, xl1), "e")
+
+
+def correct(ops, x, ke, point):
+    """x = x + K e (a state corrected by a gain-times-innovation product)."""
+    return ops.rq(ops.add(x, ke), point)
+
+
+def rate(ops, k, v):
+    """x2 = v / T: the binary point moved when T = 2**k, else [v]_vt * (1/T)."""
+    if k["t_shift"] is not None:
+        return ops.rq(ops.shift(v, -k["t_shift"]), "x2")
+    vt = ops.rq(v, "vt")                                            # the 18-bit operand of the product
+    return ops.rq(ops.mul(vt, k["inv_t"]), "x2")                    # x2 = vt * (1/T)
+
+
+def covariance_predict(ops, k, p11, p12, p21, p22):
+    """P' = Phi P Phi^T + G Q G^T in datapath units (Phi = [[1, 1], [0, 1]])."""
+    pl11 = ops.rq(ops.add(ops.add(ops.add(p11, p12), p21), p22), "pl", "pl11")   # pl11 = p11 + p12 + p21 + p22
+    pl12 = ops.rq(ops.add(p12, p22), "pl", "pl12")                                # pl12 = p12 + p22
+    pl21 = ops.rq(ops.add(p21, p22), "pl", "pl21")                                # pl21 = p21 + p22
+    pl22 = ops.rq(ops.add(p22, k["q"]), "pl", "pl22")                             # pl22 = p22 + Q'
+    return pl11, pl12, pl21, pl22
+
+
+def innovation_variance(ops, k, pl11):
+    """S = pl11 + R."""
+    return ops.rq(ops.add(pl11, k["r"]), "s")
+
+
+def gains(ops, pl11, pl21, s):
+    """K1 = pl11 / S, K2 = pl21 / S (both by the restoring divider)."""
+    return ops.div(pl11, s, "gain", "K1"), ops.div(pl21, s, "gain", "K2")
+
+
+def covariance_correct(ops, pl, products):
+    """P = P' - K C P': p11 = pl11 - K1 pl11, p12 = pl12 - K1 pl12, p21 = pl21 - K2 pl11,
+    p22 = pl22 - K2 pl12 (``products`` = K1 pl11, K1 pl12, K2 pl11, K2 pl12)."""
+    return tuple(ops.rq(ops.sub(a, b), "p", f"p{n}") for a, b, n in zip(pl, products, ("11", "12", "21", "22"),
+                                                                           strict=True))
+
+
+def full_products(ops, k1, k2, e, pl11, pl12):
+    """The six products of the time-varying measurement update."""
+    return ops.mul(k1, e), ops.mul(k2, e), (ops.mul(k1, pl11), ops.mul(k1, pl12), ops.mul(k2, pl11), ops.mul(k2, pl12))
+
+
+def steady_update(ops, k, x, u):
+    """One steady-state update: ``(next state, outputs)``."""
+    xl1 = predict(ops, x["x1"], x["v"])                             # xl1 = x1 + v
+    e = innovation(ops, u["y"], xl1)                                # e = y - xl1
+    x1 = correct(ops, xl1, ops.mul(k["k1"], e), "x1")               # x1 = xl1 + K1 e
+    v = correct(ops, x["v"], ops.mul(k["k2"], e), "v")              # v = v + T K2 e
+    return {"x1": x1, "v": v}, {"x1": x1, "x2": rate(ops, k, v), "yhat": xl1}
+
+
+def full_update(ops, k, x, u):
+    """One time-varying update: ``(next state, outputs)``."""
+    xl1 = predict(ops, x["x1"], x["v"])                             # xl1 = x1 + v
+    pl = covariance_predict(ops, k, x["p11"], x["p12"], x["p21"], x["p22"])
+    s = innovation_variance(ops, k, pl[0])                          # S = pl11 + R
+    k1, k2 = gains(ops, pl[0], pl[2], s)                            # K = [pl11, pl21] / S
+    e = innovation(ops, u["y"], xl1)                                # e = y - xl1
+    k1e, k2e, pk = full_products(ops, k1, k2, e, pl[0], pl[1])
+    x1 = correct(ops, xl1, k1e, "x1")                               # x1 = xl1 + K1 e
+    v = correct(ops, x["v"], k2e, "v")                              # v = v + K2 e
+    p11, p12, p21, p22 = covariance_correct(ops, pl, pk)
+    state = {"x1": x1, "v": v, "p11": p11, "p12": p12, "p21": p21, "p22": p22}
+    return state, {"x1": x1, "x2": rate(ops, k, v), "yhat": xl1}
+
+
+# -- what the spec needs -----------------------------------------------------------------------
+
+
+def _rate_constants(params):
+    shift = t_exponent(params.T)
+    out = {"t_shift": shift}
+    if shift is None:
+        out["inv_t"] = (1.0 / params.T, "inv_t")
+    return out
+
+
+def _steady_constants(params):
+    k1, k2 = steady_gain(params)
+    return {"k1": (k1, "gain"), "k2": (k2, "gain"), **_rate_constants(params)}
+
+
+def _full_constants(params):
+    scaled = params.scaled()
+    return {"q": (scaled.Q, "pl"), "r": (params.R, "s"), **_rate_constants(params)}
+
+
+def _initial(params):
+    scaled = params.scaled()
+    return {"x1": scaled.x0[0], "v": scaled.x0[1]}
+
+
+def _full_initial(params):
+    scaled = params.scaled()
+    (p11, p12), (p21, p22) = scaled.P0
+    return {**_initial(params), "p11": p11, "p12": p12, "p21": p21, "p22": p22}
+
+
+def _steady_applies(params):
+    if not params.Q > 0:
+        return f"model.Q = {params.Q!r}: the steady-state variant needs Q > 0 (Q = 0 gives K_inf = 0)"
+    return None
+
+
+VARIANT_SPECS = {
+    "steady": Variant("steady", "constant gain K_inf (an alpha-beta filter): one update per sample, no divider",
+                      (("x1", "x1"), ("v", "v")), _steady_constants, _initial, steady_update, _steady_applies),
+    "full": Variant("full", "time-varying gain: covariance and two restoring dividers per update",
+                    (("x1", "x1"), ("v", "v"), ("p11", "p"), ("p12", "p"), ("p21", "p"), ("p22", "p")),
+                    _full_constants, _full_initial, full_update),
+}
+
+
+def _points_for(params):
+    names = [n for n in POINTS if n not in ("inv_t", "vt")]
+    if t_exponent(params.T) is None:
+        names += ["inv_t", "vt"]
+    return [n for n in POINTS if n in names]
+
+
+def _ranges(params, stimulus=None):
+    """Largest magnitude of each point over both variants (one config serves both)."""
+    stimulus = full_scale_stimulus(params.R) if stimulus is None else stimulus
+    variants = [v for name, v in VARIANT_SPECS.items() if name == "full" or params.Q > 0]
+    return float_ranges(SPEC, params, variants, stimulus)
+
+
+def _default_formats(params, ranges, *, operand_bits, state_frac):
+    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac)
+    k = t_exponent(params.T)
+    fv = formats["v"]
+    if k is not None and fv.int_bits - k >= 1 and fv.frac_bits + k >= 0:
+        # x2 = v / 2**k: the same bits, the binary point moved (a free shift)
+        formats["x2"] = QFormat(fv.int_bits - k, fv.frac_bits + k, Rounding.HALF_UP)
+    return formats
+
+
+def _validate(config):
+    f, params = config.formats, config.params
+    scaled = params.scaled()
+    for label, value, name in (
+        ("R", params.R, "s"),
+        ("T^2*Q", scaled.Q, "pl"),
+        ("P0", np.max(np.abs(scaled.P0)), "p"),
+        ("x0[0]", abs(scaled.x0[0]), "x1"),
+        ("T*x0[1]", abs(scaled.x0[1]), "v"),
+    ):
+        if not f[name].covers(value):
+            raise ConfigError(f"model.{label} = {value:g} does not fit formats.{name} = {f[name]} (max {f[name].max_value:g})")
+    if f["s"].lsb / 2 > params.R:
+        raise ConfigError(
+            f"model.R = {params.R:g} rounds to 0 in formats.s = {f['s']} (LSB {f['s'].lsb:g}): "
+            "the divisor S = pl11 + R could be 0; give s more fraction bits"
+        )
+
+
+def _reference(params, variant, y):
+    """The float filter in input units: x1, x2, yhat."""
+    out = steady_state(y, params) if variant == "steady" else kalman_decomposed(y, params)
+    return {"x1": out["x1"], "x2": out["x2"], "yhat": out["yhat"]}
+
+
+def _random_params(rng):
+    t = float(rng.choice([1.0, 0.5, 2.0, 0.25, rng.uniform(0.1, 3.0)]))
+    a = rng.normal(size=(2, 2))
+    p0 = a @ a.T + rng.uniform(0.5, 8) * np.eye(2)
+    return KalmanParams(T=t, Q=float(rng.uniform(0.05, 20.0)), R=float(rng.uniform(0.5, 40.0)),
+                        P0=tuple(map(tuple, (p0 + p0.T) / 2)),
+                        x0=(float(rng.normal(0, 100)), float(rng.normal(0, 5))))
+
+
+def _goals(config, variant):
+    if variant == "steady":
+        return {"logic_cells": 400, "mul18": 2 + (0 if t_exponent(config.params.T) is not None else 1), "lut_levels": 16}
+    return {"logic_cells": 2000, "mul18": 12, "lut_levels": 16}
+
+
+SPEC = FilterSpec(
+    name="kalman2",
+    summary="the paper's 2-state Kalman filter (angle, rate), steady-state or time-varying gain",
+    source="seeds/001: Zhong et al. 2008, Design and implementation of a Kalman filter based on FPGA",
+    params=KalmanParams,
+    points=POINTS,
+    inputs=(("y", "the ADC code"),),
+    outputs=(Output("x1", "x1", "filtered position"), Output("x2", "x2", "rate"),
+             Output("yhat", "xl1", "one-step prediction of y")),
+    variants=VARIANT_SPECS,
+    points_for=_points_for,
+    default_formats=_default_formats,
+    ranges=_ranges,
+    validate=_validate,
+    reference=_reference,
+    core="kfpga.hw.kalman2:make_core",
+    goals=_goals,
+    default_output="x1",
+    random_params=_random_params,
+)

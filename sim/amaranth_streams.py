@@ -1,0 +1,131 @@
+"""Stream driver and monitor for Amaranth async testbenches, with random backpressure.
+
+The Amaranth-simulator counterpart of ``sim/streams.py`` (cocotb): the same random policy
+(an idle cycle before a word with probability ``p_idle``, ``ready`` high with probability
+``p_ready``), the same one-output-per-input check, the same :class:`~kfpga.sim.scoreboard.Scoreboard`.
+Every run has a cycle budget: a design that stops answering fails the test instead of hanging it.
+"""
+
+from __future__ import annotations
+
+import random
+
+import numpy as np
+from amaranth.sim import Simulator
+
+from kfpga.sim.scoreboard import Scoreboard
+
+__all__ = ["drive", "collect", "run_stream", "run_core", "run_with_deadline", "StreamTimeout"]
+
+CLOCK_PERIOD_S = 1e-8
+
+
+class StreamTimeout(AssertionError):
+    """The design did not produce the expected outputs within the cycle budget."""
+
+
+def run_with_deadline(sim, cycles, what="the test", period=CLOCK_PERIOD_S):
+    """``sim.run()``, failing with :class:`StreamTimeout` if the testbenches are still running
+    after ``cycles`` clock periods (a hang becomes a failure)."""
+
+    async def watchdog(ctx):
+        try:
+            await ctx.delay(cycles * period)  # one wake-up, not one per cycle
+        except GeneratorExit:  # the simulation ended first: the testbenches finished in time
+            return
+        raise StreamTimeout(f"{what} did not finish within {cycles} cycles")
+
+    sim.add_testbench(watchdog, background=True)
+    sim.run()
+
+
+async def drive(ctx, port, payloads, rng, p_idle=0.0):
+    """Send ``payloads`` on stream ``port``, idling for a cycle with probability ``p_idle``."""
+    for payload in payloads:
+        while p_idle and rng.random() < p_idle:
+            await ctx.tick()
+        ctx.set(port.payload, payload)
+        ctx.set(port.valid, 1)
+        await ctx.tick().until(port.ready)
+        ctx.set(port.valid, 0)
+
+
+async def collect(ctx, port, count, rng, p_ready=1.0, out=None):
+    """Receive ``count`` payloads from ``port``, ready with probability ``p_ready`` each cycle."""
+    out = [] if out is None else out
+    while len(out) < count:
+        ready = rng.random() < p_ready
+        ctx.set(port.ready, ready)
+        _, _, valid, payload = await ctx.tick().sample(port.valid, port.payload)
+        if valid and ready:
+            out.append(payload)
+    ctx.set(port.ready, 0)
+    return out
+
+
+def run_stream(dut, payloads, *, seed, p_idle=0.0, p_ready=1.0, extra_cycles=0, max_cycles=None, vcd=None):
+    """Push ``payloads`` through ``dut.i`` -> ``dut.o``; return the output payloads.
+
+    Fails if fewer outputs than inputs come out within ``max_cycles`` (default: 200 per
+    input plus 1000) and, after all expected outputs, if another appears within
+    ``extra_cycles``.
+    """
+    rng_in, rng_out = random.Random(seed), random.Random(seed + 1)
+    results, extra = [], []
+    done = []
+    sim = Simulator(dut)
+    sim.add_clock(CLOCK_PERIOD_S)
+    budget = max_cycles if max_cycles is not None else 200 * len(payloads) + 1000
+
+    async def producer(ctx):
+        await drive(ctx, dut.i, payloads, rng_in, p_idle)
+
+    async def consumer(ctx):
+        await collect(ctx, dut.o, len(payloads), rng_out, p_ready, results)
+        ctx.set(dut.o.ready, 1)
+        for _ in range(extra_cycles):
+            _, _, valid, payload = await ctx.tick().sample(dut.o.valid, dut.o.payload)
+            if valid:
+                extra.append(payload)
+        done.append(True)
+
+    sim.add_testbench(producer)
+    sim.add_testbench(consumer)
+    what = f"the stream of {len(payloads)} words (outputs so far: {{}})"
+    try:
+        if vcd:
+            with sim.write_vcd(vcd):
+                run_with_deadline(sim, budget + extra_cycles, what)
+        else:
+            run_with_deadline(sim, budget + extra_cycles, what)
+    except StreamTimeout as exc:
+        raise StreamTimeout(str(exc).format(len(results))) from None
+    assert done
+    assert not extra, f"{len(extra)} output(s) beyond one per input"
+    return results
+
+
+def run_core(config, variant, y, *, seed, channels=1, p_idle=0.0, p_ready=1.0):
+    """Run codes ``y`` (random channels when ``channels > 1``) through the filter's core, and check
+    every output field against the model with the :class:`Scoreboard`.
+
+    Returns the scoreboard's report, with ``got`` (each field's integers) and ``overflowed``.
+    """
+    rng = np.random.default_rng(seed)
+    ch = rng.integers(0, channels, len(y)) if channels > 1 else np.zeros(len(y), dtype=np.int64)
+    spec = config.spec
+    dut = spec.make_core(config, variant, channels=channels)
+    name = spec.inputs[0][0]
+    payloads = [{"channel": int(c), name: int(s)} for c, s in zip(ch, y, strict=True)]
+    out = run_stream(dut, payloads, seed=seed, p_idle=p_idle, p_ready=p_ready, extra_cycles=50)
+    board = Scoreboard(config, variant)
+    fields = ("channel", *spec.output_names, "overflow")
+    got = {f: np.array([int(getattr(o, f)) for o in out]) for f in fields}
+    for c, s in zip(ch, y, strict=True):
+        board.add_input(c, int(s))
+    for i in range(len(out)):
+        board.add_output(**{f: got[f][i] for f in fields})
+    report = board.assert_ok()
+    report["got"] = got
+    report["overflowed"] = bool(got["overflow"].any())
+    return report
