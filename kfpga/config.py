@@ -70,7 +70,7 @@ class FilterConfig:
         The filter's parameters (its ``Params`` dataclass; default: the source's values).
     formats:
         ``{point name: QFormat}``; points left out get their default from range analysis.
-        Read-only once the config is made.
+        Read-only once the config is made; :attr:`pinned` names the points given here.
     check_ranges:
         Check each format against the analysed range (on by default; word-length sweeps turn
         it off to show what narrow formats do).
@@ -83,6 +83,8 @@ class FilterConfig:
     formats: object = field(default_factory=dict)
     check_ranges: bool = True
     max_operand_bits: int = MULTIPLIER_BITS
+    #: The points whose formats were given (the rest are defaults), in datapath order.
+    pinned: tuple = field(init=False, default=())
 
     def __post_init__(self):
         registry = _registry()
@@ -111,6 +113,7 @@ class FilterConfig:
         merged = default_formats(self.params, filter=spec.name)
         merged.update(given)
         object.__setattr__(self, "formats", MappingProxyType({name: merged[name] for name in names}))
+        object.__setattr__(self, "pinned", tuple(name for name in names if name in given))
         self._validate_formats()
 
     # -- derived quantities -------------------------------------------------------------
@@ -139,7 +142,7 @@ class FilterConfig:
 
     def replace(self, **changes):
         """A copy with some fields changed (validated again)."""
-        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.init}
         if "params" in changes and "formats" not in changes:
             fields["formats"] = {}
         fields.update(changes)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import io
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -11,8 +12,9 @@ import numpy as np
 
 from kfpga.ads8364 import CODE_MAX, CODE_MIN
 from kfpga.errors import InputError
+from kfpga.paths import read_text
 
-__all__ = ["InputError", "Samples", "read_samples", "write_columns"]
+__all__ = ["InputError", "Samples", "read_samples", "read_header", "write_columns"]
 
 
 @dataclass
@@ -40,66 +42,70 @@ def _number(text, where, column):
 def read_samples(path, *, clip=False, column="y"):
     """Read the ``y`` column (signed 16-bit ADC codes) and, if present, ``truth``.
 
-    Every problem raises :class:`InputError` with the file and line: no such file, no rows, no
-    ``y`` column, a cell that is empty, not a number, NaN, not an integer, or outside
-    [-32768, 32767] (unless ``clip``, which saturates such values and counts them).
+    Every problem raises :class:`InputError` with the file and line: no such file, a folder,
+    bytes that are not UTF-8 (a byte-order mark is fine), no rows, no ``y`` column or two of
+    them, a blank line (every row is a sample: one output row per input row), a cell that is
+    empty, not a number, NaN, not an integer, or outside [-32768, 32767] (unless ``clip``,
+    which saturates such values and counts them).
     """
     path = Path(path)
-    try:
-        handle = path.open(newline="")
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
+    text = read_text(path, what="file")
+    reader = csv.reader(io.StringIO(text, newline=""))
     ys, truths, clipped = [], [], 0
-    with handle:
-        reader = csv.reader(handle)
-        try:
-            header = next(reader, None)
-        except (csv.Error, UnicodeDecodeError) as exc:
-            raise InputError(f"{path}: not a readable CSV file ({exc})") from None
-        if header is None:
-            raise InputError(f"{path}: the file is empty (expected a header line with a column named {column!r})")
-        names = [h.strip() for h in header]
-        if column not in names:
-            raise InputError(f"{path}: line 1: no column named {column!r} (the header has: {', '.join(names) or 'nothing'})")
-        iy = names.index(column)
-        it = names.index("truth") if "truth" in names else None
-        try:
-            for row in reader:
-                where = f"{path}: line {reader.line_num}"
-                if not any(cell.strip() for cell in row):
-                    continue  # blank line
-                if iy >= len(row) or not row[iy].strip():
-                    raise InputError(f"{where}: no value in column {column!r}")
-                value = _number(row[iy], where, column)
-                if value != int(value):
-                    raise InputError(f"{where}: {column} = {row[iy].strip()} is not an integer ADC code")
-                if not CODE_MIN <= value <= CODE_MAX:
-                    if not clip:
-                        raise InputError(
-                            f"{where}: {column} = {row[iy].strip()} is outside the signed 16-bit range "
-                            f"[{CODE_MIN}, {CODE_MAX}] (use --clip to saturate such values)"
-                        )
-                    value = min(max(value, CODE_MIN), CODE_MAX)
-                    clipped += 1
-                ys.append(int(value))
-                if it is not None:
-                    if it >= len(row) or not row[it].strip():
-                        raise InputError(f"{where}: no value in column 'truth'")
-                    truths.append(_number(row[it], where, "truth"))
-        except (csv.Error, UnicodeDecodeError) as exc:
-            raise InputError(f"{path}: line {reader.line_num}: not readable as CSV ({exc})") from None
+    try:
+        header = next(reader, None)
+    except csv.Error as exc:
+        raise InputError(f"{path}: not a readable CSV file ({exc})") from None
+    if header is None:
+        raise InputError(f"{path}: the file is empty (expected a header line with a column named {column!r})")
+    names = [h.strip() for h in header]
+    for name in (column, "truth"):
+        if names.count(name) > 1:
+            raise InputError(f"{path}: line 1: the header names column {name!r} twice")
+    if column not in names:
+        raise InputError(f"{path}: line 1: no column named {column!r} (the header has: {', '.join(names) or 'nothing'})")
+    iy = names.index(column)
+    it = names.index("truth") if "truth" in names else None
+    try:
+        for row in reader:
+            where = f"{path}: line {reader.line_num}"
+            if not any(cell.strip() for cell in row):
+                raise InputError(f"{where}: a blank line; every row is a sample (delete the line, or give it a value)")
+            if iy >= len(row) or not row[iy].strip():
+                raise InputError(f"{where}: no value in column {column!r}")
+            value = _number(row[iy], where, column)
+            if value != int(value):
+                raise InputError(f"{where}: {column} = {row[iy].strip()} is not an integer ADC code")
+            if not CODE_MIN <= value <= CODE_MAX:
+                if not clip:
+                    raise InputError(
+                        f"{where}: {column} = {row[iy].strip()} is outside the signed 16-bit range "
+                        f"[{CODE_MIN}, {CODE_MAX}] (use --clip to saturate such values)"
+                    )
+                value = min(max(value, CODE_MIN), CODE_MAX)
+                clipped += 1
+            ys.append(int(value))
+            if it is not None:
+                if it >= len(row) or not row[it].strip():
+                    raise InputError(f"{where}: no value in column 'truth'")
+                truths.append(_number(row[it], where, "truth"))
+    except csv.Error as exc:
+        raise InputError(f"{path}: line {reader.line_num}: not readable as CSV ({exc})") from None
     if not ys:
         raise InputError(f"{path}: no data rows after the header")
     truth = np.array(truths, dtype=np.float64) if it is not None else None
     return Samples(np.array(ys, dtype=np.int64), truth, clipped, str(path))
 
 
+def read_header(path):
+    """The column names of a CSV file (BOM dropped, cells stripped)."""
+    text = read_text(path, what="file")
+    return [h.strip() for h in next(csv.reader(io.StringIO(text, newline="")), [])]
+
+
 def write_columns(path, columns):
     """Write ``{name: array}`` as CSV, one row per element (integers stay integers)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     names = list(columns)
     arrays = [np.asarray(columns[n]) for n in names]
     with path.open("w", newline="") as handle:

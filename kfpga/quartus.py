@@ -15,10 +15,11 @@ from string import Template
 from kfpga import __version__
 from kfpga.ads8364 import CHANNELS, figure
 from kfpga.board import SYSTEM_MHZ, SYSTEM_PERIOD_NS
-from kfpga.errors import PinError
+from kfpga.errors import InputError, PinError
 from kfpga.hw.generate import TOP_NAME, write_top
 from kfpga.hw.top import PORTS, out_width
 from kfpga.hw.top import out_field as top_out_field
+from kfpga.paths import read_text
 
 __all__ = ["FAMILY", "DEVICE", "DEVICE_ORDERING", "PinError", "PinRow", "load_pins", "port_bits", "check_pins",
            "write_project"]
@@ -31,7 +32,9 @@ TCO_FRACTION = 0.5
 BOARD_NS = 2.0
 #: The assumed receiver of the filtered output bus (edit in the .sdc for a real one).
 OUT_SETUP_NS, OUT_HOLD_NS = 5.0, 0.0
-_PIN = re.compile(r"^PIN_[A-Z]*\d+$")
+_PIN = re.compile(r"^PIN_(\d+)$")
+#: Pins of the EP2C20Q240 (a 240-pin PQFP): PIN_1 .. PIN_240.
+PACKAGE_PINS = 240
 
 
 @dataclass(frozen=True)
@@ -53,13 +56,17 @@ def _constraint_file(name):
 
 
 def load_pins(path=None):
-    """Rows of a pin table (default: ``constraints/pins.csv``); ``#`` lines are comments."""
-    source = _constraint_file("pins.csv") if path is None else Path(path)
-    try:
-        text = source.read_text()
-    except FileNotFoundError:
-        raise PinError(f"{path}: no such pin table") from None
-    label = "constraints/pins.csv" if path is None else str(path)
+    """Rows of a pin table (default: ``constraints/pins.csv``); ``#`` lines are comments.
+
+    A row whose pin is left empty is a bit still to be placed: :func:`check_pins` names it.
+    """
+    if path is None:
+        text, label = _constraint_file("pins.csv").read_text(encoding="utf-8"), "constraints/pins.csv"
+    else:
+        try:
+            text, label = read_text(path, what="pin table"), str(path)
+        except InputError as exc:
+            raise PinError(str(exc)) from None
     rows, header = [], None
     for number, line in enumerate(text.splitlines(), start=1):
         if not line.strip() or line.lstrip().startswith("#"):
@@ -75,8 +82,12 @@ def load_pins(path=None):
         port, bit, pin, standard = (c.strip() for c in cells[:4])
         if bit and not bit.isdigit():
             raise PinError(f"{label}: line {number}: bit must be empty or a number, not {bit!r}")
-        if not _PIN.match(pin):
+        match = _PIN.match(pin)
+        if pin and not match:
             raise PinError(f"{label}: line {number}: pin must look like PIN_37, not {pin!r}")
+        if match and not 1 <= int(match[1]) <= PACKAGE_PINS:
+            raise PinError(f"{label}: line {number}: {pin} does not exist: the EP2C20Q240 has pins "
+                           f"PIN_1..PIN_{PACKAGE_PINS}")
         rows.append(PinRow(port, int(bit) if bit else None, pin, standard or "3.3-V LVTTL",
                            cells[4].strip() if len(cells) > 4 else "", number))
     if not rows:
@@ -106,6 +117,9 @@ def check_pins(rows, config, label="pin table", out_field=None):
             raise PinError(f"{label}: line {row.line}: the design has no port bit {row.target}")
         if key in by_bit:
             raise PinError(f"{label}: line {row.line}: {row.target} already has {by_bit[key].pin} (line {by_bit[key].line})")
+        if not row.pin:
+            raise PinError(f"{label}: line {row.line}: {row.target} has no pin yet; give it one of your board's "
+                           "free user I/O pins")
         if row.pin in by_pin:
             raise PinError(f"{label}: line {row.line}: {row.pin} is already used by {by_pin[row.pin].target}")
         by_bit[key], by_pin[row.pin] = row, row
@@ -114,6 +128,33 @@ def check_pins(rows, config, label="pin table", out_field=None):
         raise PinError(f"{label}: no pin for {', '.join(missing[:8])}{' ...' if len(missing) > 8 else ''} "
                        f"({len(missing)} port bit(s)); add rows for them")
     return by_bit
+
+
+def pin_table(config, *, out_field=None, base=None):
+    """The text of a pin table for this config: the rows of ``base`` (default: the built-in table)
+    for every port bit the design has, and rows with an empty pin for bits it lacks.
+
+    ``out_data`` follows the chosen field's width: a wider format needs rows the base table
+    does not have (their pins are the user's to choose, as only the board says which are free),
+    a narrower one drops rows.
+    """
+    rows = load_pins(base)
+    by_bit = {(r.port, r.bit): r for r in rows}
+    lines = [
+        f"# Pin table of {TOP_NAME} on the {DEVICE_ORDERING} for the {config.filter} filter, out_data = "
+        f"{top_out_field(config, out_field)} ({out_width(config, out_field)} bits).",
+        "# Edit it for your board: one row per port bit (bit empty for 1-bit ports). A row with an empty pin",
+        "# still needs one of the board's free user I/O pins; kfpga generate refuses the table until it has one.",
+        "port,bit,pin,io_standard,note",
+    ]
+    for port, bit in port_bits(config, out_field):
+        row = by_bit.get((port, bit))
+        if row is None:
+            lines.append(f"{port},{'' if bit is None else bit},,3.3-V LVTTL,choose a free user I/O pin")
+        else:
+            note = f'"{row.note}"' if "," in row.note else row.note
+            lines.append(f"{port},{'' if bit is None else bit},{row.pin},{row.io_standard},{note}")
+    return "\n".join(lines) + "\n"
 
 
 def _sdc_values(ratio):

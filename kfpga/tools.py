@@ -8,8 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-__all__ = ["verilator_root", "verilator_env", "verilator_lint", "iverilog_path", "iverilog_parse", "simulator_available",
-           "yosys_command"]
+__all__ = ["verilator_root", "verilator_env", "verilator_lint", "verilator_fst", "iverilog_path", "iverilog_parse",
+           "simulator_available", "yosys_command"]
 
 
 def yosys_command(*args):
@@ -54,6 +54,14 @@ def verilator_lint(verilog_path, top, waivers=None):
     cmd.append(str(verilog_path))
     result = subprocess.run(cmd, capture_output=True, text=True, env=verilator_env())
     return result.returncode, result.stdout + result.stderr
+
+
+def verilator_fst():
+    """Whether Verilator can write FST here: its FST writer compiles against the lz4 headers
+    (Debian: liblz4-dev); without them it writes VCD."""
+    cxx = os.environ.get("CXX", "c++")
+    probe = subprocess.run([cxx, "-E", "-x", "c++", "-"], input="#include <lz4.h>\n", capture_output=True, text=True)
+    return probe.returncode == 0
 
 
 def iverilog_path():

@@ -3,9 +3,10 @@
 # Ref: Texas Instruments SBAS219C (ADS8364), Timing and control; Explanation of clock, reset
 #      and EOC; Getting data (Figures 7, 9). Timing figures: kfpga/ads8364.py (TIMING).
 
-The model is simulator-agnostic: a wrapper (``sim/bench.py`` for cocotb, the Amaranth tests
-for the RTL units) reports every pin edge with its time in ns and applies the output events
-the model returns (``(time_ns, "eoc" | "data", value)``; ``data`` ``None`` means not driven).
+The model is simulator-agnostic: a wrapper (``sim/bench.py`` for cocotb, ``tests/adc_harness.py``
+for the Amaranth unit tests) reports the pin levels with :meth:`ADS8364.pins` whenever they may
+have changed, with the time in ns, and applies the output events the model returns
+(``(time_ns, "eoc" | "data", value)``; ``data`` ``None`` means not driven).
 
 Behaviour modelled:
 
@@ -87,6 +88,7 @@ class ADS8364:
         self._addr = 0
         self._addr_change = -math.inf
         self._clk_period = figure("tC1")
+        self._levels = None  # the pin levels of the last report
         # statistics for tests
         self.conversions = 0
         self.eoc_pulses = 0
@@ -115,17 +117,51 @@ class ADS8364:
             self._fail(t, f"{spec.description} is {measured:.1f} ns, below the minimum {limit:g} ns ({symbol})")
 
     # -- pin events ---------------------------------------------------------------------------
-    def adopt_levels(self, *, clk, hold, reset, cs, rd, wr, addr):
+    def adopt_levels(self, levels):
         """Take the pin levels found when the model is attached to a running design.
 
-        They are not edges: no width or setup is measured from them, only from the next edges.
+        ``levels`` as for :meth:`pins`. They are not edges: no width or setup is measured from
+        them, only from the next edges.
         """
-        self._clk, self._hold, self._reset = int(clk), [int(h) for h in hold], int(reset)
-        self._cs, self._rd, self._addr = int(cs), int(rd), int(addr)
-        if not wr:
+        self._levels = dict(levels)
+        self._clk, self._reset = int(levels["clk"]), int(levels["reset"])
+        self._hold = [int(levels[f"hold_{p}"]) for p in "abc"]
+        self._cs, self._rd, self._addr = int(levels["cs"]), int(levels["rd"]), int(levels["addr"])
+        if not levels["wr"]:
             self._fail(0.0, "WR is low: the controller must not write to the ADC")
         if not (self._cs or self._rd):
             self._fail(0.0, "attached in the middle of a read")
+
+    #: The pins a controller drives, in the order :meth:`pins` applies changes of one instant.
+    PINS = ("clk", "hold_a", "hold_b", "hold_c", "reset", "wr", "cs", "addr", "rd")
+
+    def edge(self, t, pin, value):
+        """Pin ``pin`` (one of :data:`PINS`) took ``value`` at time ``t`` (ns); returns the events."""
+        if pin == "clk":
+            return self.clk_edge(t, value)
+        if pin.startswith("hold_"):
+            return self.hold_edge(t, "abc".index(pin[-1]), value)
+        return getattr(self, {"reset": "reset_edge", "wr": "wr_edge", "cs": "cs_edge", "addr": "addr_change",
+                              "rd": "rd_edge"}[pin])(t, value)
+
+    def pins(self, t, levels):
+        """Report the levels of all pins at time ``t`` (ns); every change since the last report is
+        an edge, through :meth:`edge`.
+
+        ``levels``: ``{pin: level}`` for every pin of :data:`PINS`. Changes in one report happen
+        in one instant and are applied in the order the checks need: a rising RD ends its read
+        before an address change is looked at, CS before the address, RD falling last (it starts
+        a read with the address as it is now). The first report, with no :meth:`adopt_levels`
+        before it, counts every level as an edge. Returns the model's output events.
+        """
+        old, self._levels = self._levels, dict(levels)
+        events = []
+        if old is not None and levels["rd"] == 1 and old["rd"] == 0:
+            events += self.edge(t, "rd", 1)
+        for pin in self.PINS:
+            if old is None or levels[pin] != old[pin]:
+                events += self.edge(t, pin, levels[pin])
+        return events
 
     def clk_edge(self, t, level):
         self.clk_edges += 1

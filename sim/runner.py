@@ -21,7 +21,7 @@ from pathlib import Path
 
 from kfpga.config import FilterConfig
 from kfpga.hw.generate import TOP_NAME, write_block, write_top
-from kfpga.tools import simulator_available, verilator_env
+from kfpga.tools import simulator_available, verilator_env, verilator_fst
 
 __all__ = ["SIMULATORS", "Built", "build", "run", "SimulationFailed"]
 
@@ -99,6 +99,8 @@ def build(simulator, design, *, config=None, root=DEFAULT_ROOT, waves=False, qui
         if simulator == "verilator":
             sources.append(VerilatorControlFile(src / "verilator_lint.vlt"))
             build_args = ["-O3", "--x-assign", "fast", "--x-initial", "fast", "-Wno-fatal"]
+            if waves and verilator_fst():  # FST, as Icarus writes: compressed, a tenth of the VCD's size
+                build_args.append("--trace-fst")
         stamp = build_dir / ".built"
         log = build_dir / "build.log"
         if not stamp.exists():

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from kfpga import scenarios
-from kfpga.csvio import read_samples
+from kfpga.csvio import read_header, read_samples
 from kfpga.model.reference import KalmanParams
 
 __all__ = ["Source", "scenario_source", "csv_source", "stress_codes"]
@@ -80,10 +80,7 @@ def scenario_source(name, n, seed, params=None, *, glitches=None):
 
 def csv_source(path, *, clip=False):
     """Replay a CSV: columns ``y0``..``y5`` if present, else the ``y`` column on all six."""
-    import csv
-
-    with open(path, newline="") as handle:
-        header = [h.strip() for h in next(csv.reader(handle), [])]
+    header = read_header(path)
     if all(f"y{c}" in header for c in range(6)):
         codes = np.stack([read_samples(path, clip=clip, column=f"y{c}").y for c in range(6)])
     else:

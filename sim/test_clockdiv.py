@@ -7,6 +7,7 @@ from cocotb.clock import Clock
 from cocotb.simtime import get_sim_time
 from cocotb.triggers import ClockCycles, Edge, RisingEdge
 
+from kfpga.board import SYSTEM_PERIOD_NS
 from kfpga.sim.bench import sim_params, write_results
 
 
@@ -14,7 +15,7 @@ from kfpga.sim.bench import sim_params, write_results
 async def divider_ratio_and_duty(dut):
     p = sim_params()
     ratio = int(p.get("ratio", 10))
-    Clock(dut.clk, 20, unit="ns").start()
+    Clock(dut.clk, SYSTEM_PERIOD_NS, unit="ns").start()
     dut.rst.value = 0
     await ClockCycles(dut.clk, 2 * ratio)
     strobes = []

@@ -5,11 +5,12 @@ import random
 from amaranth import ClockDomain, Elaboratable, Module, Signal
 from amaranth.sim import Simulator
 
+from kfpga.board import SYSTEM_PERIOD_NS
 from kfpga.hw.ads8364 import ADS8364Controller
 from kfpga.hw.clockdiv import ClockDivider
 from kfpga.sim.ads8364 import ADS8364
 
-SYS_NS = 20  # 50 MHz
+SYS_NS = SYSTEM_PERIOD_NS
 
 
 class ControllerTop(Elaboratable):
@@ -49,7 +50,6 @@ class Harness:
         self.outputs = []
         self.timeouts_seen = 0
         self._pending = []
-        self._pins = None
         self.stop = False
 
     def pins(self, ctx):
@@ -57,7 +57,7 @@ class Harness:
         w = c.word
         return {
             "clk": ctx.get(self.top.divider.clk_out),
-            "hold": (ctx.get(w.hold_a), ctx.get(w.hold_b), ctx.get(w.hold_c)),
+            "hold_a": ctx.get(w.hold_a), "hold_b": ctx.get(w.hold_b), "hold_c": ctx.get(w.hold_c),
             "reset": ctx.get(w.reset),
             "cs": ctx.get(w.cs),
             "rd": ctx.get(w.rd),
@@ -65,26 +65,10 @@ class Harness:
             "addr": ctx.get(c.addr),
         }
 
-    def _report(self, t, old, new):
-        adc, events = self.adc, []
-        if old is None or new["clk"] != old["clk"]:
-            events += adc.clk_edge(t, new["clk"])
-        for pair in range(3):
-            events += adc.hold_edge(t, pair, new["hold"][pair])
-        events += adc.reset_edge(t, new["reset"])
-        events += adc.wr_edge(t, new["wr"])
-        if old is not None and new["rd"] == 1 and old["rd"] == 0:  # RD rising before address changes
-            events += adc.rd_edge(t, 1)
-        events += adc.cs_edge(t, new["cs"])
-        events += adc.addr_change(t, new["addr"])
-        events += adc.rd_edge(t, new["rd"])
-        return events
-
     async def monitor(self, ctx):
         c = self.top.ctrl
         ctx.set(c.o.ready, 1)
-        self._pins = self.pins(ctx)  # power-up levels, at t = 0
-        self._pending += self._report(0, None, self._pins)
+        self._pending += self.adc.pins(0, self.pins(ctx))  # power-up levels, at t = 0
         while not self.stop:
             ready = self.rng.random() < self.p_ready
             ctx.set(c.o.ready, ready)
@@ -93,9 +77,7 @@ class Harness:
             t = self.cycle * SYS_NS
             if valid and ready:
                 self.outputs.append((payload.channel, payload.sample))
-            new = self.pins(ctx)
-            self._pending += self._report(t, self._pins, new)
-            self._pins = new
+            self._pending += self.adc.pins(t, self.pins(ctx))
             due = [e for e in self._pending if e[0] <= t]
             self._pending = [e for e in self._pending if e[0] > t]
             for _, name, value in due:

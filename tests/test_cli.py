@@ -185,3 +185,70 @@ def test_filter_option_and_config_must_agree(capsys, tmp_path):
     code, _, err = run_cli(capsys, "compare", "--variant", "fast", "--samples", "300")
     assert code == 2 and err.strip() == ("kfpga compare: error: variant must be one of steady, full for the kalman2 "
                                          "filter, not 'fast'")
+
+
+def test_readme_synopsis_is_the_parsers():
+    from pathlib import Path
+
+    from kfpga.cli import synopsis
+
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    block = readme.split("## Command line\n\n```\n", 1)[1].split("```", 1)[0]
+    assert block.rstrip("\n") == synopsis(), "README's command synopsis differs from the parser: regenerate it"
+
+
+def test_pins_write_follows_the_out_field_width(capsys, tmp_path):
+    from kfpga.quartus import load_pins
+
+    cfg = tmp_path / "wide.toml"
+    cfg.write_text('[formats.x1]\nformat = "Q18.10"\n[formats.xl1]\nformat = "Q18.10"\n')
+    table = tmp_path / "wide_pins.csv"
+    code, _, err = run_cli(capsys, "pins", "--config", str(cfg), "--write", str(table))
+    assert code == 0 and err.strip() == f"wrote {table}; 2 port bit(s) still need a pin of your board"
+    rows = load_pins(table)
+    data = [r for r in rows if r.port == "out_data"]
+    assert [r.bit for r in data] == list(range(28)) and [r.pin for r in data[26:]] == ["", ""]
+    code, _, err = run_cli(capsys, "generate", "--config", str(cfg), "--pins", str(table), "--out", str(tmp_path / "o"),
+                           "--no-lint")
+    assert code == 2 and "out_data[26] has no pin yet; give it one of your board's free user I/O pins" in err
+    # x2 on out_data: 25 bits, the default table's extra rows dropped
+    code, out, _ = run_cli(capsys, "pins", "--out-field", "x2")
+    assert code == 0 and sum(1 for line in out.splitlines() if line.startswith("out_data,")) == 25
+
+
+def test_a_byte_order_mark_is_fine_everywhere(capsys, tmp_path):
+    bom = b"\xef\xbb\xbf"
+    src = tmp_path / "in.csv"
+    src.write_bytes(bom + b"y\r\n1\r\n2\r\n3\r\n")
+    dst = tmp_path / "out.csv"
+    assert run_cli(capsys, "filter", "--input", str(src), "--output", str(dst))[0] == 0
+    assert len(list(csv.DictReader(dst.open()))) == 3
+    cfg = tmp_path / "k.toml"
+    cfg.write_bytes(bom + b"[model]\nR = 9.0\n")
+    code, out, _ = run_cli(capsys, "formats", "--config", str(cfg), "--json")
+    assert code == 0 and json.loads(out)
+    pins = tmp_path / "p.csv"
+    code, out, _ = run_cli(capsys, "pins")
+    pins.write_bytes(bom + out.encode())
+    code, _, err = run_cli(capsys, "generate", "--pins", str(pins), "--out", str(tmp_path / "g"), "--no-lint")
+    assert code == 0, err
+
+
+def test_formats_toml_leaves_the_formats_to_the_parameters(capsys, tmp_path):
+    code, out, _ = run_cli(capsys, "formats", "--toml")
+    assert code == 0 and '# format = "Q18.8"' in out and '\nformat = "' not in out
+    path = tmp_path / "k.toml"
+    path.write_text(out.replace("R = 4.0", "R = 400.0"))
+    code, out2, err = run_cli(capsys, "formats", "--config", str(path), "--json")
+    assert code == 0, err  # the formats follow the new R instead of failing on the old defaults
+    assert {r["point"]: r["format"] for r in json.loads(out2)}["s"] != "Q7.11"
+    code, out3, _ = run_cli(capsys, "formats", "--toml", "--pin-formats")
+    assert '\nformat = "Q18.8"' in out3
+
+
+def test_one_output_row_per_input_row_or_an_error(capsys, tmp_path):
+    """A blank line in the middle is an error, never a dropped row; a final newline is not a row."""
+    src = write_csv(tmp_path / "in.csv", ["y"], [[v] for v in range(5)])
+    dst = tmp_path / "out.csv"
+    assert run_cli(capsys, "filter", "--input", str(src), "--output", str(dst))[0] == 0
+    assert len(list(csv.DictReader(dst.open()))) == 5

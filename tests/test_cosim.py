@@ -88,6 +88,9 @@ def test_system_six_channels(simulator, variant, seed):
     result = run(build(simulator, "top", variant=variant, six=True), "test_top", testcase="system_bit_exact",
                  params={"variant": variant, "seed": seed, "samples": 3000, "six": True})
     check(result, 3000)
+    # each channel settles on its own: the figures skip every channel's start, not the stream's
+    assert result["settle_per_channel"] == 50
+    assert result["rmse_hw"] <= 1.01 * result["rmse_float"] < result["rmse_raw"]
 
 
 @pytest.mark.parametrize("case", ["reset_mid_conversion", "reset_mid_update", "missing_eoc_times_out_and_recovers",
@@ -114,7 +117,7 @@ def test_simulate_command_json(variant, capsys, seed):
 
 
 def test_simulate_waves(simulator, capsys, monkeypatch, tmp_path):
-    """--waves leaves a waveform under build/waves (VCD from Verilator, FST from Icarus)."""
+    """--waves leaves an FST waveform under build/waves, from either simulator."""
     from kfpga.cli import main
 
     monkeypatch.chdir(tmp_path)  # build/ of this test, not of the checkout
@@ -125,8 +128,9 @@ def test_simulate_waves(simulator, capsys, monkeypatch, tmp_path):
     assert len(result["waves"]) == 1
     wave = tmp_path / result["waves"][0]
     assert wave.parent == tmp_path / "build" / "waves"
-    if wave.suffix == ".vcd":  # text: it must describe this design's pins
-        head = wave.read_text(errors="replace")[:200000]
-        assert "$enddefinitions" in head and "adc_rd_n" in head
-    else:  # FST is compressed binary
-        assert wave.suffix == ".fst" and wave.stat().st_size > 1000
+    from kfpga.tools import verilator_fst
+
+    if simulator == "icarus" or verilator_fst():
+        assert wave.suffix == ".fst" and wave.stat().st_size > 1000  # FST is compressed binary
+    else:  # no lz4 headers: Verilator writes VCD (and simulate says why)
+        assert wave.suffix == ".vcd" and "adc_rd_n" in wave.read_text(errors="replace")[:200000]

@@ -11,14 +11,6 @@ from adc_harness import ControllerTop, Harness, wait_outputs, wait_state
 from kfpga.hw.ads8364 import ADS8364Controller
 from kfpga.sim.sources import Source, scenario_source
 
-SEED = 8364
-
-
-@pytest.fixture(autouse=True)
-def _print_seed():
-    print(f"seed {SEED} (ADC sources, ready patterns)")
-
-
 # The documented 16-bit control word layout (hw/ads8364.py), written out independently here.
 BITS = {"hold_a": 0, "hold_b": 1, "hold_c": 2, "addr": 3, "cs": 6, "rd": 7, "wr": 8, "byte": 9,
         "add": 10, "reset": 11, "start": 12, "wait_eoc": 13, "latch": 14, "last": 15}
@@ -42,15 +34,15 @@ def expected_table(channel):
     return table
 
 
-def codes_source(n=400, seed=SEED):
+def codes_source(seed, n=400):
     return scenario_source("sine", n, seed)
 
 
 @pytest.mark.parametrize("channel", [0, 3, 5])
-def test_control_words_cycle_by_cycle(channel):
+def test_control_words_cycle_by_cycle(channel, seed):
     """After reset: RESET pulse, one idle period, then the 22 states with their words, repeatedly."""
     top = ControllerTop(channel=channel)
-    h = Harness(top, codes_source())
+    h = Harness(top, codes_source(seed))
 
     async def script(ctx, h):
         await wait_outputs(ctx, h, 4)
@@ -78,9 +70,9 @@ def test_control_words_cycle_by_cycle(channel):
     assert h.adc.conversions >= len(h.outputs)
 
 
-def test_six_channel_mode():
+def test_six_channel_mode(seed):
     top = ControllerTop(six_channel=True)
-    h = Harness(top, codes_source())
+    h = Harness(top, codes_source(seed))
 
     async def script(ctx, h):
         await wait_outputs(ctx, h, 18)
@@ -94,7 +86,7 @@ def test_six_channel_mode():
     lasts = [(w >> BITS["last"]) & 1 for s, w in reads if s == 21]
     assert lasts[:6] == [0, 0, 0, 0, 0, 1]
     # every word is the held sample of its channel: one HOLD samples all six at once
-    source = codes_source()
+    source = codes_source(seed)
     expected = source.expected(3)
     got = h.outputs[:18]
     assert [c for c, _ in got] == [0, 1, 2, 3, 4, 5] * 3
@@ -102,9 +94,9 @@ def test_six_channel_mode():
         assert [v for _, v in got[6 * k: 6 * k + 6]] == list(expected[:, k])
 
 
-def test_eoc_timeout_raises_flag_and_recovers():
+def test_eoc_timeout_raises_flag_and_recovers(seed):
     top = ControllerTop(channel=1)
-    source = codes_source()
+    source = codes_source(seed)
     h = Harness(top, source)
 
     async def script(ctx, h):
@@ -129,9 +121,9 @@ def test_eoc_timeout_raises_flag_and_recovers():
     assert max(runs) == 21
 
 
-def test_timeout_flag_is_sticky_and_period_is_forty_clks():
+def test_timeout_flag_is_sticky_and_period_is_forty_clks(seed):
     top = ControllerTop(channel=0)
-    h = Harness(top, codes_source())
+    h = Harness(top, codes_source(seed))
 
     async def script(ctx, h):
         await wait_outputs(ctx, h, 1)
@@ -152,9 +144,9 @@ def test_timeout_flag_is_sticky_and_period_is_forty_clks():
 
 
 @pytest.mark.parametrize("state", range(22))
-def test_reset_in_every_state_returns_to_idle(state):
+def test_reset_in_every_state_returns_to_idle(state, seed):
     top = ControllerTop(channel=2)
-    h = Harness(top, codes_source())
+    h = Harness(top, codes_source(seed))
     checks = {}
 
     async def script(ctx, h):
@@ -177,9 +169,9 @@ def test_reset_in_every_state_returns_to_idle(state):
 
 
 @pytest.mark.parametrize("illegal", range(22, 32))
-def test_illegal_state_recovers(illegal):
+def test_illegal_state_recovers(illegal, seed):
     top = ControllerTop(channel=4)
-    h = Harness(top, codes_source())
+    h = Harness(top, codes_source(seed))
 
     forced = {}
 
@@ -196,9 +188,9 @@ def test_illegal_state_recovers(illegal):
     assert h.periods[forced["period"] + 1] == (0, word(addr=4))
 
 
-def test_backpressure_loses_nothing():
+def test_backpressure_loses_nothing(seed):
     top = ControllerTop(six_channel=True)
-    h = Harness(top, codes_source(), p_ready=0.05, seed=SEED)
+    h = Harness(top, codes_source(seed), p_ready=0.05, seed=seed)
 
     async def script(ctx, h):
         await wait_outputs(ctx, h, 30)
@@ -209,9 +201,9 @@ def test_backpressure_loses_nothing():
     assert len(reads) - len(h.outputs) <= 1  # at most the read in flight
 
 
-def test_enable_low_idles():
+def test_enable_low_idles(seed):
     top = ControllerTop(channel=0)
-    h = Harness(top, codes_source())
+    h = Harness(top, codes_source(seed))
 
     async def script(ctx, h):
         await wait_outputs(ctx, h, 1)

@@ -199,6 +199,7 @@ def test_resource_report_is_consistent(tmp_path, capsys):
         assert {"variant", "luts", "ffs", "mul18", "mul9", "lut_levels", "logic_cells"} <= set(r)
         assert r["luts"] >= r["logic_cells"] - r["ffs"] > 0 and r["ffs"] > 0
         assert r["lut_levels"] <= r["lut_levels_no_carry"]
+        assert r["longest_path_ends_at"], "the report names where the longest path ends"
         assert r["whole_design"]["logic_cells"] > r["logic_cells"]  # the ADC front end costs something
     assert steady["mul18"] < full["mul18"]
     assert steady["logic_cells"] < full["logic_cells"] and steady["ffs"] < full["ffs"]

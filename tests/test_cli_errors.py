@@ -1,0 +1,196 @@
+"""Every user error is one clear line: exit code 2, no traceback, nothing written or changed.
+
+One table of bad invocations across every command. Each row gives the arguments, the files the
+folder holds before the call, and the line stderr must end with. The test runs each in a fresh
+folder and checks the exit code, that stderr is one line (argparse's usage block aside) naming
+the problem, and that no file was created or changed.
+"""
+
+import hashlib
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from kfpga.cli import main
+
+GOOD_CSV = "y,truth\n" + "".join(f"{v},{v}.0\n" for v in (0, 10, 20, 30, 40, 50))
+LATIN1 = "y\n\xe9\n".encode("latin-1")
+BOM_CSV = b"\xef\xbb\xbfy\n1\n2\n3\n"
+
+# (id, argv, files {name: text or bytes}, the end of the error line)
+CASES = [
+    ("compare-one-sample", ["compare", "--samples", "1", "--seed", "1"], {}, "compare needs at least 2 samples, not 1"),
+    ("compare-config-dir", ["compare", "--config", "cfgdir"], {"cfgdir/x": ""}, "cfgdir: is a directory, not a config file"),
+    ("compare-config-latin1", ["compare", "--config", "k.toml"], {"k.toml": b"[model]\n# \xe9\n"},
+     "k.toml: line 2: byte 0xe9 is not UTF-8; save the config file as UTF-8"),
+    ("compare-config-missing", ["compare", "--config", "nope.toml"], {}, "nope.toml: no such config file"),
+    ("toml-model-5", ["compare", "--config", "k.toml"], {"k.toml": "model = 5\n"},
+     "k.toml: model must be a table ([model]), not 5"),
+    ("toml-formats-5", ["compare", "--config", "k.toml"], {"k.toml": "formats = 5\n"},
+     "k.toml: formats must be a table ([formats]), not 5"),
+    ("toml-filter-name", ["compare", "--config", "k.toml"], {"k.toml": '[filter]\nname = "nope"\n'},
+     "k.toml: filter.name: no filter named 'nope'; registered: kalman2"),
+    ("toml-bad-format", ["formats", "--config", "k.toml"], {"k.toml": '[formats.x1]\nformat = "18.8"\n'},
+     "formats.x1: format must look like 'Q18.8' (integer bits incl. sign . fraction bits), not '18.8'"),
+    ("toml-format-and-bits", ["formats", "--config", "k.toml"],
+     {"k.toml": '[formats.x1]\nformat = "Q18.8"\nint_bits = 18\n'},
+     "formats.x1: give either format or int_bits and frac_bits, not both"),
+    ("toml-syntax", ["formats", "--config", "k.toml"], {"k.toml": "[model\n"}, None),
+    ("filter-output-dir", ["filter", "--input", "in.csv", "--output", "outdir"], {"in.csv": GOOD_CSV, "outdir/x": ""},
+     "--output outdir: is a directory; give a file name"),
+    ("filter-output-no-parent", ["filter", "--input", "in.csv", "--output", "no/such/out.csv"], {"in.csv": GOOD_CSV},
+     "--output no/such/out.csv: the folder no/such does not exist"),
+    ("filter-output-is-input", ["filter", "--input", "in.csv", "--output", "in.csv"], {"in.csv": GOOD_CSV},
+     "--output in.csv: is also an input; write to another file"),
+    ("filter-output-ext", ["filter", "--input", "in.csv", "--output", "out.png"], {"in.csv": GOOD_CSV},
+     "--output out.png: the extension must be .csv or .txt, not '.png'"),
+    ("filter-input-latin1", ["filter", "--input", "in.csv", "--output", "o.csv"], {"in.csv": LATIN1},
+     "in.csv: line 2: byte 0xe9 is not UTF-8; save the file as UTF-8"),
+    ("filter-input-dir", ["filter", "--input", "d", "--output", "o.csv"], {"d/x": ""}, "d: is a directory, not a file"),
+    ("filter-blank-line", ["filter", "--input", "in.csv", "--output", "o.csv"], {"in.csv": "y\n1\n\n2\n"},
+     "in.csv: line 3: a blank line; every row is a sample (delete the line, or give it a value)"),
+    ("filter-duplicate-column", ["filter", "--input", "in.csv", "--output", "o.csv"], {"in.csv": "y,y\n1,2\n"},
+     "in.csv: line 1: the header names column 'y' twice"),
+    ("filter-bad-value", ["filter", "--input", "in.csv", "--output", "o.csv"], {"in.csv": "y\n1\nabc\n"},
+     "in.csv: line 3: y = 'abc' is not a number"),
+    ("filter-variant", ["filter", "--input", "in.csv", "--output", "o.csv", "--variant", "fast"], {"in.csv": GOOD_CSV},
+     "variant must be one of steady, full for the kalman2 filter, not 'fast'"),
+    ("plot-ext", ["compare", "--samples", "300", "--seed", "1", "--plot", "x.xyz"], {},
+     "--plot x.xyz: the extension must be .png or .svg or .pdf, not '.xyz'"),
+    ("plot-no-ext", ["compare", "--samples", "300", "--seed", "1", "--plot", "plots/noext"], {"plots/keep": ""},
+     "--plot plots/noext: the extension must be .png or .svg or .pdf, not 'none'"),
+    ("plot-dir", ["compare", "--samples", "300", "--seed", "1", "--plot", "out.png"], {"out.png/x": ""},
+     "--plot out.png: is a directory; give a file name"),
+    ("sweep-plot-no-parent", ["sweep", "--samples", "300", "--seed", "1", "--plot", "a/b.png", "--quiet"], {},
+     "--plot a/b.png: the folder a does not exist"),
+    ("samples-more-than-rows", ["compare", "--input", "in.csv", "--samples", "5000"], {"in.csv": GOOD_CSV},
+     "--samples 5000 is more than the 6 rows of in.csv"),
+    ("seed-with-input", ["compare", "--input", "in.csv", "--seed", "3"], {"in.csv": GOOD_CSV},
+     "--seed does not apply with --input: the samples come from the file, no noise is drawn"),
+    ("scenario-with-input", ["compare", "--input", "in.csv", "--scenario", "sine"], {"in.csv": GOOD_CSV},
+     "--scenario does not apply with --input: the samples come from the file"),
+    ("clip-without-input", ["compare", "--clip", "--samples", "300"], {},
+     "--clip does not apply with a scenario: scenarios stay within the 16-bit range; --clip is for --input files"),
+    ("settle-too-big", ["compare", "--samples", "300", "--seed", "1", "--settle", "300"], {},
+     "--settle must be between 0 and 299, not 300"),
+    ("sweep-pinned-formats", ["sweep", "--config", "k.toml", "--samples", "300", "--quiet"],
+     {"k.toml": '[formats.x1]\nformat = "Q18.9"\n'},
+     "sweep sets every format itself, so the formats k.toml pins would be ignored (x1): remove its [formats] tables, "
+     "or use compare"),
+    ("sweep-no-truth", ["sweep", "--input", "in.csv", "--quiet"], {"in.csv": "y\n1\n2\n3\n"},
+     "sweep needs a truth to measure RMSE: use a scenario or an --input with a 'truth' column"),
+    ("generate-out-under-file", ["generate", "--out", "f/sub"], {"f": "a file"}, "--out f/sub: f is a file, not a folder"),
+    ("generate-channel-six", ["generate", "--out", "o", "--channels", "6", "--channel", "B1"], {},
+     "--channel does not apply with --channels 6: all six channels are sampled and filtered"),
+    ("generate-out-field", ["generate", "--out", "o", "--out-field", "x9"], {},
+     "--out-field: out_field must be one of x1, x2, yhat for the kalman2 filter, not 'x9'"),
+    ("generate-ratio", ["generate", "--out", "o", "--ratio", "1"], {}, "--ratio must be >= 2, not 1"),
+    ("generate-ratio-fast-adc", ["generate", "--out", "o", "--ratio", "8", "--no-lint"], {},
+     "--ratio 8 makes the ADC clock 6.25 MHz; the ADS8364 allows 5 MHz at most (tC1 = 200 ns)"),
+    ("pins-999", ["generate", "--out", "o", "--pins", "p.csv", "--no-lint"],
+     {"p.csv": "port,bit,pin,io_standard\nclk50,,PIN_999,3.3-V LVTTL\n"},
+     "p.csv: line 2: PIN_999 does not exist: the EP2C20Q240 has pins PIN_1..PIN_240"),
+    ("pins-missing-bit", ["generate", "--out", "o", "--pins", "p.csv", "--no-lint"],
+     {"p.csv": "port,bit,pin,io_standard\nclk50,,PIN_34,3.3-V LVTTL\n"}, None),
+    ("pins-wide-x1", ["generate", "--out", "o", "--config", "k.toml", "--no-lint"],
+     {"k.toml": '[formats.x1]\nformat = "Q18.10"\n[formats.xl1]\nformat = "Q18.10"\n'}, None),
+    ("pins-write-dir", ["pins", "--write", "d"], {"d/x": ""}, "--write d: is a directory; give a file name"),
+    ("formats-toml-and-json", ["formats", "--toml", "--json"], {}, "--toml and --json are two ways to print the same: choose one"),
+    ("formats-pin-without-toml", ["formats", "--pin-formats"], {},
+     "--pin-formats does not apply with the table: it says how --toml writes the formats"),
+    ("filter-name", ["formats", "--filter", "nope"], {}, "--filter: no filter named 'nope'; registered: kalman2"),
+    ("config-unknown-key", ["compare", "--config", "k.toml"], {"k.toml": "[model]\nP1 = 3\n"},
+     "k.toml: unknown key model.P1; the kalman2 filter has: T, Q, R, P0, x0"),
+    ("simulate-channel-six", ["simulate", "--channels", "6", "--channel", "A1"], {},
+     "--channel does not apply with --channels 6: all six channels are sampled and filtered"),
+    ("simulate-samples-vs-input", ["simulate", "--input", "in.csv", "--samples", "50"], {"in.csv": GOOD_CSV},
+     "--samples 50 is more than the 6 estimates the 6 rows of in.csv give"),
+    ("simulate-seed-with-input", ["simulate", "--input", "in.csv", "--seed", "1"], {"in.csv": GOOD_CSV},
+     "--seed does not apply with --input: the ADC replays the file, no noise is drawn"),
+    ("resources-variant", ["resources", "--variant", "slow"], {},
+     "variant must be one of steady, full for the kalman2 filter, not 'slow'"),
+    ("model-q0-steady", ["compare", "--config", "k.toml", "--samples", "300"], {"k.toml": "[model]\nQ = 0.0\n"},
+     "model.Q = 0.0: the steady-state variant needs Q > 0 (Q = 0 gives K_inf = 0)"),
+    ("argparse-samples", ["compare", "--samples", "-3"], {}, "argument --samples: must be a positive integer, not '-3'"),
+    ("argparse-choice", ["simulate", "--simulator", "modelsim"], {}, None),
+    ("argparse-unknown", ["filters", "--verbose"], {}, "kfpga filters: error: unrecognized arguments: --verbose"),
+]
+
+# cases whose error line is only checked for its subject (the exact text is tested elsewhere)
+SUBJECTS = {
+    "toml-syntax": "k.toml: not valid TOML: ",
+    "pins-missing-bit": "p.csv: no pin for rst_n, adc_clk",
+    "pins-wide-x1": "no pin for out_data[26], out_data[27]",
+    "argparse-choice": "argument --simulator: invalid choice: 'modelsim'",
+}
+
+
+def snapshot(folder):
+    return {p.relative_to(folder): hashlib.sha1(p.read_bytes()).hexdigest() for p in folder.rglob("*") if p.is_file()}
+
+
+@pytest.mark.parametrize(("argv", "files", "message"), [pytest.param(a, f, m, id=i) for i, a, f, m in CASES])
+def test_bad_invocation_is_one_line_and_changes_nothing(argv, files, message, tmp_path, monkeypatch, capsys, request):
+    for name, content in files.items():
+        path = tmp_path / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        (path.write_bytes if isinstance(content, bytes) else path.write_text)(content)
+    monkeypatch.chdir(tmp_path)
+    before = snapshot(tmp_path)
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse
+        code = exc.code
+    out, err = capsys.readouterr()
+    assert code == 2, (out, err)
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    last = lines[-1]
+    if "usage:" not in err:
+        assert len(lines) == 1, err  # one line, unless argparse puts its usage block above it
+    expected = message if message is not None else SUBJECTS[request.node.callspec.id]
+    if message is not None:
+        assert last.endswith(expected), last
+    else:
+        assert expected in last, last
+    assert snapshot(tmp_path) == before, "a failed command must not create or change files"
+
+
+def test_table_covers_every_command():
+    commands = {argv[0] for _, argv, _, _ in CASES}
+    assert commands >= {"compare", "sweep", "filter", "filters", "formats", "generate", "pins", "resources", "simulate"}
+    assert len(CASES) >= 40
+
+
+def test_broken_pipe_is_quiet(tmp_path):
+    """`kfpga formats --json | head -1`: the reader stops early; no traceback."""
+    code = ("import sys; from kfpga.cli import main; sys.exit(main(['formats', '--json']))")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.readline()
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    proc.wait(timeout=60)
+    assert "Traceback" not in err and "BrokenPipe" not in err, err
+
+
+def test_argparse_errors_end_with_the_one_line_error():
+    result = subprocess.run([sys.executable, "-m", "kfpga.cli", "compare", "--bogus"], capture_output=True, text=True)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert lines[0].startswith("usage: kfpga compare") and lines[-1] == "kfpga compare: error: unrecognized arguments: --bogus"
+
+
+def test_the_tool_runs_from_an_unactivated_venv(tmp_path):
+    """No venv on PATH (a user runs .venv/bin/kfpga): Yosys still comes from the interpreter's package."""
+    from kfpga.tools import yosys_command
+
+    env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
+    result = subprocess.run(yosys_command("-q", "-p", "help"), capture_output=True, text=True, env=env, cwd=tmp_path,
+                            timeout=300)
+    assert result.returncode == 0, result.stderr
+    exe = Path(sys.executable).parent / "kfpga"
+    if exe.exists():
+        result = subprocess.run([str(exe), "filters"], capture_output=True, text=True, env=env, timeout=120)
+        assert result.returncode == 0 and "kalman2" in result.stdout, result.stderr
