@@ -477,7 +477,7 @@ def _run_resources(args):
         bar.set_postfix_str("whole design")
         results["whole_design"] = estimate(top_v, "kfpga_top")
         bar.update()
-    goals = config.spec.goals(config, args.variant)
+    goals = config.spec.goals(config, args.variant, args.channels)
     core = results["core"]
     met = {k: core[k] <= v for k, v in goals.items()}
     trimmed = [name for name in config.spec.output_names if name != top.out_field]

@@ -129,7 +129,8 @@ class FilterSpec:
         ``"module:function"`` building the Amaranth core, ``f(config, variant, *, channels)``;
         imported only when hardware is asked for (the model never imports ``hw/``).
     goals:
-        ``goals(config, variant) -> {"logic_cells": n, "mul18": n, "lut_levels": n}``.
+        ``goals(config, variant, channels) -> {"logic_cells": n, "mul18": n, "lut_levels": n}``: the
+        resource goals of the core with ``channels`` channel states.
     default_output:
         The output that drives ``out_data`` on the board by default.
     random_params:

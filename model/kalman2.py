@@ -269,10 +269,14 @@ def _random_params(rng):
                         x0=(float(rng.normal(0, 100)), float(rng.normal(0, 5))))
 
 
-def _goals(config, variant):
+def _goals(config, variant, channels=1):
+    """One channel: 400 / 2,000 logic cells; each further channel state may add its registers and
+    their read mux (about 2.5 cells per state bit: 130 for the steady core's x1, v; 300 for the
+    time-varying core's six registers)."""
     if variant == "steady":
-        return {"logic_cells": 400, "mul18": 2 + (0 if t_exponent(config.params.T) is not None else 1), "lut_levels": 16}
-    return {"logic_cells": 2000, "mul18": 12, "lut_levels": 16}
+        return {"logic_cells": 400 + 130 * (channels - 1),
+                "mul18": 2 + (0 if t_exponent(config.params.T) is not None else 1), "lut_levels": 16}
+    return {"logic_cells": 2000 + 300 * (channels - 1), "mul18": 12, "lut_levels": 16}
 
 
 SPEC = FilterSpec(
