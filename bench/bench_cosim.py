@@ -31,7 +31,7 @@ def main(argv=None):
     rows = []
     for variant, samples in (("steady", args.samples), ("full", max(args.samples // 10, 1000))):
         for sim in sims:
-            r = run(build(sim, "core", variant=variant), "test_kalman",
+            r = run(build(sim, "core", variant=variant), "test_core",
                     params={"variant": variant, "seed": SEED, "samples": samples}, tag="bench")
             assert r["mismatches"] == 0
             rows.append({"what": f"{variant} core alone", "simulator": sim, "samples": samples,

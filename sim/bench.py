@@ -20,6 +20,7 @@ from cocotb.clock import Clock
 from cocotb.simtime import get_sim_time
 from cocotb.triggers import ClockCycles, Edge, Event, FallingEdge, ReadOnly, RisingEdge, Timer
 
+from kfpga.ads8364 import CODE_MAX, CODE_MIN
 from kfpga.analysis import float_run, rmse, sqnr_db
 from kfpga.board import SYSTEM_PERIOD_NS
 from kfpga.config import FilterConfig
@@ -119,7 +120,7 @@ def make_source(params, count):
         rng = random.Random(params["seed"])
         for k in rng.sample(range(5, max(count, 10)), min(5, max(count - 5, 1))):
             glitches[k] = (params.get("channel", 0) if not params.get("six") else rng.randrange(6),
-                           rng.choice([32767, -32768]))
+                           rng.choice([CODE_MAX, CODE_MIN]))
     if params.get("csv"):
         source = csv_source(params["csv"], clip=params.get("clip", False))
         source.glitches = glitches

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from kfpga import scenarios
+from kfpga.ads8364 import CODE_MAX, CODE_MIN
 from kfpga.csvio import read_header, read_samples
 from kfpga.model.reference import KalmanParams
 
@@ -16,14 +17,14 @@ def stress_codes(seed, n):
     a full-scale square wave (its overshoot saturates the innovation), extreme codes at random."""
     rng = np.random.default_rng(seed)
     y = np.cumsum(rng.normal(0, 300, n)) + rng.normal(0, 40, n)
-    y = np.clip(np.round(y), -32768, 32767)
+    y = np.clip(np.round(y), CODE_MIN, CODE_MAX)
     k = n // 8
-    y[k:k + 30] = 32767
-    y[k + 30:k + 60] = -32768
-    square = np.tile(np.repeat([32767, -32768], 5), 20)
+    y[k:k + 30] = CODE_MAX
+    y[k + 30:k + 60] = CODE_MIN
+    square = np.tile(np.repeat([CODE_MAX, CODE_MIN], 5), 20)
     y[2 * k:2 * k + len(square)] = square[: max(0, min(len(square), n - 2 * k))]
-    y[rng.integers(0, n, max(n // 50, 1))] = -32768
-    y[rng.integers(0, n, max(n // 50, 1))] = 32767
+    y[rng.integers(0, n, max(n // 50, 1))] = CODE_MIN
+    y[rng.integers(0, n, max(n // 50, 1))] = CODE_MAX
     return y.astype(np.int64)
 
 
@@ -39,7 +40,7 @@ class Source:
         codes = np.asarray(codes, dtype=np.int64)
         if codes.ndim != 2 or codes.shape[0] != 6 or codes.shape[1] == 0:
             raise ValueError(f"codes must have shape (6, n) with n > 0, not {codes.shape}")
-        if codes.min() < -32768 or codes.max() > 32767:
+        if codes.min() < CODE_MIN or codes.max() > CODE_MAX:
             raise ValueError("codes must be signed 16-bit values")
         self.codes = codes
         self.truth = truth

@@ -80,5 +80,5 @@ def test_reset_does_not_glitch_the_adc_clock():
 
 
 def test_bad_ratio():
-    with pytest.raises(ValueError, match="ratio must be an integer >= 2, not 1"):
+    with pytest.raises(ValueError, match="^ratio must be an integer >= 2, not 1$"):
         ClockDivider(ratio=1)

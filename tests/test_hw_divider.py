@@ -105,5 +105,5 @@ def test_divider_latency_is_constant():
 
 
 def test_divider_rejects_bad_widths():
-    with pytest.raises(ValueError, match="quotient_bits must be a positive integer, not 0"):
+    with pytest.raises(ValueError, match="^quotient_bits must be a positive integer, not 0$"):
         Divider(dividend_bits=8, divisor_bits=4, quotient_bits=0)
