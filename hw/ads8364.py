@@ -24,8 +24,12 @@ What a real board needs, beyond the paper:
   encodings; they all go to CONV0 with the restart sequence, so none can hang.
 * Backpressure: READ0 waits until the output register is free, so a sample is never
   overwritten. A slow consumer stretches the sampling period instead of losing samples.
-* The address pins follow the control word one system cycle late, so A2..A0 never change in
-  the same instant RD rises (they are stable while RD is low, tD9).
+* The control word is decoded from the state one system cycle after the strobe, so each of
+  the two has a cycle to itself (see ``kfpga resources``: it meets 50 MHz with margin); every
+  pin moves one system cycle after the strobe. The data bus is captured on the strobe that
+  ends READ1, nine system cycles after RD fell.
+* The address pins follow the control word one more system cycle late, so A2..A0 never change
+  in the same instant RD rises (they are stable while RD is low, tD9).
 """
 
 
@@ -196,9 +200,11 @@ class ADS8364Controller(wiring.Component):
 
         next_state = Signal.like(state)
         next_index = Signal.like(read_index)
-        restart_phase = Signal.like(restart)  # the restart phase the next CONV0 period shows
-        timing_out = Signal()
-        m.d.comb += [next_state.eq(state), next_index.eq(read_index), restart_phase.eq(restart)]
+        # the limit compare is registered: periods moves only on a strobe, the compare is read
+        # on the next one
+        at_limit = Signal()
+        m.d.sync += at_limit.eq(periods >= self.timeout_periods - 1)
+        m.d.comb += [next_state.eq(state), next_index.eq(read_index)]
 
         with m.If(self.strobe):
             with m.Switch(state):
@@ -213,9 +219,9 @@ class ADS8364Controller(wiring.Component):
                     m.d.sync += periods.eq(periods + 1)
                     with m.If(eoc_seen):
                         m.d.comb += next_state.eq(READ0)
-                    with m.Elif(periods >= self.timeout_periods - 1):
-                        m.d.comb += [timing_out.eq(1), next_state.eq(CONV0), restart_phase.eq(2)]
-                        m.d.sync += self.timeout.eq(1)
+                    with m.Elif(at_limit):  # the EOC timeout: flag it, start over cleanly
+                        m.d.comb += next_state.eq(CONV0)
+                        m.d.sync += [self.timeout.eq(1), restart.eq(2)]
                 with m.Case(READ0):
                     with m.If(~self.o.valid | self.o.ready):
                         m.d.comb += next_state.eq(READ1)
@@ -233,23 +239,33 @@ class ADS8364Controller(wiring.Component):
                     else:
                         m.d.comb += next_state.eq(CONV0)
                 with m.Default():  # one of the 10 illegal encodings: start over cleanly
-                    m.d.comb += [next_state.eq(CONV0), next_index.eq(0), restart_phase.eq(2)]
+                    m.d.comb += [next_state.eq(CONV0), next_index.eq(0)]
+                    m.d.sync += restart.eq(2)
+            m.d.sync += [state.eq(next_state), read_index.eq(next_index)]
 
-            # the word of the next period, decoded from the next state (registered: no glitches)
+        # the word of the period that began, decoded from the state one system cycle after the
+        # strobe (and registered: no glitches). Deciding the next state and decoding its word in
+        # the strobe's own cycle would put both between two registers, 14 LUT levels; this way
+        # each has a cycle. Every pin moves one system cycle after the strobe, together. A CONV0
+        # period shows the restart phase (2: RESET low, 1: one idle period, 0: convert), which
+        # then counts down.
+        decode = Signal()
+        m.d.sync += decode.eq(self.strobe)
+        with m.If(decode):
             next_word = Signal(ControlWord)
-            with m.Switch(next_state):
+            with m.Switch(state):
                 for s, fields in enumerate(self.table):
                     with m.Case(s):
                         m.d.comb += next_word.eq(ControlWord.const(fields))
                 with m.Default():
                     m.d.comb += next_word.eq(ControlWord.const(idle_word()))
             if self.six_channel:
-                m.d.comb += [next_word.addr.eq(next_index), next_word.last.eq(next_word.latch & (next_index == 5))]
-            with m.If(next_state == CONV0):
-                with m.If(restart_phase == 2):
+                m.d.comb += [next_word.addr.eq(read_index), next_word.last.eq(next_word.latch & (read_index == 5))]
+            with m.If(state == CONV0):
+                with m.If(restart == 2):
                     m.d.comb += next_word.eq(ControlWord.const({**idle_word(self.table[CONV0]["addr"]), "reset": 0}))
-                with m.Elif((restart_phase == 1) | ~self.enable):
+                with m.Elif((restart == 1) | ~self.enable):
                     m.d.comb += next_word.eq(ControlWord.const(idle_word(self.table[CONV0]["addr"])))
-                m.d.sync += restart.eq(Mux(restart_phase == 0, 0, restart_phase - 1))
-            m.d.sync += [state.eq(next_state), read_index.eq(next_index), word.eq(next_word)]
+                m.d.sync += restart.eq(Mux(restart == 0, 0, restart - 1))
+            m.d.sync += word.eq(next_word)
         return m

@@ -14,7 +14,9 @@ ADC controller only produces valid ones.
 
 from __future__ import annotations
 
-from amaranth import Module, Mux, Signal, signed
+from functools import reduce
+
+from amaranth import Cat, Const, Module, Mux, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -24,7 +26,7 @@ from kfpga.hw.divider import Divider
 from kfpga.hw.layouts import input_layout, output_layout
 from kfpga.hw.storage import at, check_channels, select, state_array
 from kfpga.model import kalman2 as eq
-from kfpga.ops import divider_shift, quotient_bits
+from kfpga.ops import Fx, divider_shift, quotient_bits
 
 __all__ = ["SteadyKalman", "FullKalman", "make_core"]
 
@@ -37,12 +39,14 @@ def _signature(config, channels):
     }
 
 
-def write_estimate(m, core, channel, outputs, overflowed):
-    """Register the estimate word on ``core.o`` and raise the sticky flag on an overflow."""
-    m.d.sync += [core.o.payload.channel.eq(channel), core.o.payload.overflow.eq(overflowed)]
+def write_estimate(m, core, channel, outputs, flags):
+    """Register the estimate word on ``core.o``, with the sample's overflow flags (1-bit values).
+
+    The flags are registered one by one and ORed after the register (see :meth:`_Core.flag_outputs`):
+    an OR tree after the saturations would lengthen the last stage's path by its depth.
+    """
+    m.d.sync += [core.o.payload.channel.eq(channel), core.o_flags.eq(Cat(*flags))]
     m.d.sync += [getattr(core.o.payload, name).eq(value.raw) for name, value in outputs.items()]
-    with m.If(overflowed):
-        m.d.sync += core.overflow.eq(1)
 
 
 class _Core(wiring.Component):
@@ -58,19 +62,71 @@ class _Core(wiring.Component):
         self.reset_state = config.reset_state(variant)
         super().__init__(_signature(config, channels))
 
+    def flag_outputs(self, m, count):
+        """``o.payload.overflow`` and the sticky ``overflow`` from ``count`` registered flag bits."""
+        self.o_flags = Signal(count, name="o_flags")
+        sticky = Signal(name="sticky")
+        word = Signal(name="word_overflow")
+        m.d.comb += [word.eq(self.o_flags.any()), self.o.payload.overflow.eq(word),
+                     self.overflow.eq(sticky | (self.o.valid & word))]
+        m.d.sync += sticky.eq(self.overflow)
+
     def _states(self, names):
         f = self.config.formats
         points = dict(self.config.spec.variants[self.variant].state)
         return {n: state_array(self.channels, signed(f[points[n]].width), self.reset_state[n], n) for n in names}
 
 
-class SteadyKalman(_Core):
-    """Steady-state (constant-gain) Kalman core: one sample per clock, fully pipelined.
+def _steady_predict(ops, k, v):
+    v["xl1"] = eq.predict(ops, v["x1"], v["v"])                         # xl1 = x1 + v
+    return v
 
-    Stage 1 registers the input word; stage 2 computes the whole update (the loop
-    x -> xl1 -> e -> K e -> x closes within one cycle to take a sample every clock) and
-    registers the state and the output word. Both stages stall together when ``o`` is not
-    ready, so nothing is dropped.
+
+def _steady_innovation(ops, k, v):
+    v["e"] = eq.innovation(ops, v["y"], v["xl1"])                       # e = y - xl1
+    return v
+
+
+def _steady_products(ops, k, v):
+    v["k1e"], v["k2e"] = ops.mul(k["k1"], v["e"]), ops.mul(k["k2"], v["e"])  # K1 e, T K2 e
+    return v
+
+
+def _steady_correct(ops, k, v):
+    v["x1_next"] = eq.correct(ops, v["xl1"], v["k1e"], "x1")             # x1 = xl1 + K1 e
+    v["v_next"] = eq.correct(ops, v["v"], v["k2e"], "v")                 # v = v + T K2 e
+    return v
+
+
+#: The steady-state update as four steps of about one carry chain (or one multiplier) each;
+#: ``CUTS[L]`` lists the steps a pipeline of L stages registers after (SteadyKalman).
+STEADY_STEPS = (_steady_predict, _steady_innovation, _steady_products, _steady_correct)
+#: What each step reads: a value no later step reads is not registered.
+STEADY_READS = ({"x1", "v"}, {"y", "xl1"}, {"e"}, {"xl1", "v", "k1e", "k2e"})
+CUTS = {1: (), 2: (2,), 3: (1, 3), 4: (1, 2, 3)}
+
+
+class SteadyKalman(_Core):
+    """Steady-state (constant-gain) Kalman core: the loop x -> xl1 -> e -> K e -> x over
+    ``stages`` register stages, channels interleaved.
+
+    The update is the model's own (``model/kalman2.py``), split into four steps: xl1 = x1 + v;
+    e = y - xl1; the products K1 e, T K2 e; x1 = xl1 + K1 e and v = v + T K2 e. A pipeline of
+    L stages registers between them (:data:`CUTS`): L = 4 puts one carry chain, or one
+    multiplier, between two registers. A sample enters an input register, reads its
+    channel's state in the first stage, and writes it back at the end of stage L. A sample may
+    follow another of the same channel only once that one has written back (the core stalls
+    its input until then; it never forwards), so:
+
+    * one channel: one sample every L cycles;
+    * C >= L channels in turn (the six ADS8364 channels): one sample per clock across them,
+      each channel's state advancing once per L cycles (C-slow operation);
+    * any order of channels works; a channel repeated within L samples waits.
+
+    The rate output x2 = v / T is a free shift when T = 2**k; otherwise it takes four more
+    stages after the loop (the new v registered, rounded into the 18-bit operand vt, multiplied
+    by 1/T, rounded into x2), which add latency, not cycles per update. All stages stall together
+    when ``o`` is not ready, so nothing is dropped.
 
     Parameters
     ----------
@@ -78,6 +134,9 @@ class SteadyKalman(_Core):
         The shared :class:`~kfpga.config.FilterConfig` (the ``kalman2`` filter).
     channels:
         Independent channel states (1..8).
+    stages:
+        L, the register stages of the loop (1..4; default 4, the one that meets 50 MHz on the
+        -8 part with margin: see ``kfpga resources``).
 
     Members
     -------
@@ -89,64 +148,141 @@ class SteadyKalman(_Core):
         Sticky: some write saturated (or wrapped) since reset.
     """
 
-    def __init__(self, config, *, channels=1):
+    def __init__(self, config, *, channels=1, stages=4):
+        if not isinstance(stages, int) or isinstance(stages, bool) or stages not in CUTS:
+            raise ValueError(f"stages must be 1, 2, 3 or 4, not {stages!r}")
         super().__init__(config, "steady", channels)
+        self.stages = stages
+        self.output_stages = 0 if self.constants["t_shift"] is not None else 4
 
     @property
     def latency(self):
         """Cycles from the input handshake cycle to the first cycle with ``o.valid`` high."""
-        return 2
+        return 1 + self.stages + self.output_stages
 
     @property
     def cycles_per_update(self):
-        """Cycles from accepting one sample to being able to accept the next (``o`` always ready)."""
-        return 1
+        """Cycles from accepting one sample to accepting the next of the same channel (``o`` ready)."""
+        return self.stages
+
+    def samples_per_clock(self, channels):
+        """Samples per clock with ``channels`` channels in turn: ``min(1, channels / L)``."""
+        return min(1.0, channels / self.stages)
 
     def elaborate(self, platform):
         m = Module()
+        f = self.config.formats
         regs = self._states(("x1", "v"))
+        advance = Signal()
+        m.d.comb += advance.eq(~self.o.valid | self.o.ready)
 
-        # stage 1: input register
-        a_valid = Signal()
-        a = Signal.like(self.i.payload)
-        advance = ~self.o.valid | self.o.ready
-        m.d.comb += self.i.ready.eq(advance)
+        # the input register
+        s0_valid = Signal()
+        s0 = Signal.like(self.i.payload, name="s0")
+        hazard = Signal()  # a sample of s0's channel has not written back yet
+        take = Signal()  # s0 moves on (or is empty) and takes the next input
+        m.d.comb += [take.eq(advance & (~s0_valid | ~hazard)), self.i.ready.eq(take)]
+        with m.If(take):
+            m.d.sync += [s0_valid.eq(self.i.valid), s0.eq(self.i.payload)]
+
+        # the loop: groups of steps between registers, the state read in the first
+        live = {"y": Fx(s0.y.as_signed(), 0, None, CODE_FORMAT, "y"),
+                "x1": Fx(select(regs["x1"], s0.channel).as_signed(), f["x1"].frac_bits, None, f["x1"], "x1"),
+                "v": Fx(select(regs["v"], s0.channel).as_signed(), f["v"].frac_bits, None, f["v"], "v")}
+        valid, channel, flags = s0_valid & ~hazard, s0.channel, Const(0, 1)
+        in_flight = []  # (valid, channel) of the samples before their write-back
+        cuts = CUTS[self.stages]
+        groups, start = [], 0
+        for cut in (*cuts, len(STEADY_STEPS)):
+            groups.append(STEADY_STEPS[start:cut])
+            start = cut
+        last_flags = []
+        for n, group in enumerate(groups, start=1):
+            ops = AmaranthOps(m, f, prefix=f"s{n}_")
+            k = ops.constants(self.constants)
+            if STEADY_STEPS[-1] in group and n > 1 and self.channels == 1:
+                # one channel: v is read again from the state, which cannot change before this
+                # write-back (a sample of the same channel waits); it saves a register per
+                # stage, where with several channels the read mux would cost more than it saves
+                live["v"] = Fx(regs["v"][0].as_signed(), f["v"].frac_bits, None, f["v"], "v")
+            for step in group:
+                live = step(ops, k, live)
+            if n == len(groups):
+                last_flags = [f for _, f in ops.flags]
+            else:
+                flags = flags | ops.overflow()
+            if n < len(groups):
+                later = set().union(*STEADY_READS[STEADY_STEPS.index(group[-1]) + 1:])
+                if self.channels == 1:
+                    later.discard("v")
+                live = {name: value for name, value in live.items() if name in later}
+                valid, channel, flags, live = self._register(m, advance, n, valid, channel, flags, live)
+                in_flight.append((valid, channel))
+        # write-back at the end of the last loop stage
+        with m.If(advance & valid):
+            m.d.sync += [at(regs["x1"], channel).eq(live["x1_next"].raw), at(regs["v"], channel).eq(live["v_next"].raw)]
+        m.d.comb += hazard.eq(reduce(lambda a, b: a | b, [v & (c == s0.channel) for v, c in in_flight], Const(0, 1)))
+
+        # the outputs: x2 = v / T in one step (a shift) or three (operand, product, rounding)
+        out = {"x1": live["x1_next"], "yhat": live["xl1"], "x2_part": live["v_next"]}
+        if self.output_stages == 0:
+            out_steps = [lambda ops, k, v: eq.rate(ops, k, v)]
+        else:  # the loop's result registered first: each step then has a cycle to itself
+            out_steps = [lambda ops, k, v: v, eq.rate_operand, eq.rate_product, eq.rate_write]
+        pending = [flags, *last_flags]  # flags not yet ORed into one register bit
+        for n, step in enumerate(out_steps, start=1):
+            ops = AmaranthOps(m, f, prefix=f"o{n}_")
+            out = {**out, "x2_part": step(ops, ops.constants(self.constants), out["x2_part"])}
+            pending += [f for _, f in ops.flags]
+            if n < len(out_steps):
+                combined = reduce(lambda a, b: a | b, pending, Const(0, 1))
+                valid, channel, flags, out = self._register(m, advance, f"o{n}", valid, channel, combined, out)
+                pending = [flags]
+        self.flag_outputs(m, len(pending))
         with m.If(advance):
-            m.d.sync += [a_valid.eq(self.i.valid), a.eq(self.i.payload)]
-
-        # stage 2: the update, the model's own function
-        ops = AmaranthOps(m, self.config.formats)
-        k = ops.constants(self.constants)
-        x = {n: ops.input(select(r, a.channel), n) for n, r in regs.items()}  # the state points are x1, v
-        state, outputs = eq.steady_update(ops, k, x, {"y": ops.input(a.y, CODE_FORMAT, "y")})
-        overflowed = ops.overflow()
-
-        with m.If(advance):
-            m.d.sync += self.o.valid.eq(a_valid)
-            with m.If(a_valid):
-                m.d.sync += [at(regs[n], a.channel).eq(state[n].raw) for n in regs]
-                write_estimate(m, self, a.channel, outputs, overflowed)
+            m.d.sync += self.o.valid.eq(valid)
+            with m.If(valid):
+                write_estimate(m, self, channel, {"x1": out["x1"], "x2": out["x2_part"], "yhat": out["yhat"]}, pending)
         return m
+
+    @staticmethod
+    def _register(m, advance, tag, valid, channel, flags, live):
+        """A register stage: every live value, the valid bit, the channel and the flags so far."""
+        r_valid, r_flags = Signal(name=f"r{tag}_valid"), Signal(name=f"r{tag}_flags")
+        r_channel = Signal.like(channel, name=f"r{tag}_channel")
+        held = {}
+        with m.If(advance):
+            m.d.sync += [r_valid.eq(valid), r_channel.eq(channel), r_flags.eq(flags)]
+            for name, value in live.items():
+                reg = Signal(signed(len(value.raw)), name=f"r{tag}_{name}")
+                m.d.sync += reg.eq(value.raw)
+                held[name] = Fx(reg, value.frac, value.const, value.fmt, name)
+        return r_valid, r_channel, r_flags, held
 
 
 class FullKalman(_Core):
     """Time-varying Kalman core: the decomposed equations with two restoring dividers.
 
-    Schedule per update (one channel at a time)::
+    Schedule per update (one channel at a time), at most one carry chain or one multiplier
+    between two registers so that it meets 50 MHz on the -8 part with margin::
 
         IDLE   accept a sample; load the channel's state
-        TU     time update xl1, pl11..pl22, S = pl11 + R and the innovation e; start both
-               divisions K1 = pl11 / S, K2 = pl21 / S
+        TU1    time update: xl1 = x1 + v, pl11..pl22
+        TU2    S = pl11 + R, the innovation e = y - xl1, the dividends |pl11|, |pl21| (shifted)
+        GO     start both divisions K1 = pl11 / S, K2 = pl21 / S
         DIV    quotient_bits + 1 cycles (18 with the default formats)
         MUL    the six products K1 e, K2 e, K1 pl11, K1 pl12, K2 pl11, K2 pl12 (registered)
-        WB     requantise, saturate, write the state back and the estimate out
+        WB     requantise, saturate, write the state back; the flags registered one by one
+        X1     x2 = v / T (a free shift when T = 2**k) and the estimate out; when T is not a
+               power of two, X1..X3 are the three steps of x2 (v rounded into vt, the product by
+               1/T, the rounding into x2), and X3 puts the estimate out
 
-    An update takes ``quotient_bits + 5`` cycles, 22 with the default formats
-    (:attr:`cycles_per_update`): the input is accepted in cycle ``c``, the estimate is on ``o``
-    in cycle ``c + 22``, and the next input can be accepted in that same cycle. If ``o`` is
-    still full, WB waits.
+    An update takes ``quotient_bits + 8`` cycles, 25 with the default formats, two more when
+    T is not a power of two (:attr:`cycles_per_update`): the input is accepted in cycle ``c``,
+    the estimate is on ``o`` in cycle ``c + cycles_per_update``, and the next input can be
+    accepted in that same cycle. If ``o`` is still full, the last state waits.
 
-    Parameters and members as :class:`SteadyKalman`.
+    Parameters and members as :class:`SteadyKalman` (without ``stages``).
     """
 
     def __init__(self, config, *, channels=1):
@@ -157,11 +293,12 @@ class FullKalman(_Core):
         self.dividend_bits = f["pl"].width + self.div_shift
         self._divider_args = {"dividend_bits": self.dividend_bits, "divisor_bits": f["s"].width,
                               "quotient_bits": self.quotient_bits}
+        self.rate_steps = 0 if self.constants["t_shift"] is not None else 3
 
     @property
     def cycles_per_update(self):
         """Cycles from accepting one sample to being able to accept the next (``o`` always ready)."""
-        return 1 + 1 + (self.quotient_bits + 1) + 1 + 1
+        return 1 + 2 + 1 + (self.quotient_bits + 1) + 1 + 1 + 1 + (self.rate_steps - 1 if self.rate_steps else 0)
 
     @property
     def latency(self):
@@ -175,76 +312,106 @@ class FullKalman(_Core):
         regs = self._states(names)
         m.submodules.div1 = div1 = Divider(**self._divider_args)
         m.submodules.div2 = div2 = Divider(**self._divider_args)
+        points = dict(self.config.spec.variants["full"].state)
 
         # working registers of the channel being updated
         channel = Signal.like(self.i.payload.channel)
         sample = Signal(signed(CODE_FORMAT.width))
-        points = dict(self.config.spec.variants["full"].state)
         work = {n: Signal(signed(f[points[n]].width), name=f"{n}_w") for n in names}
         flags = Signal()  # OR of the overflow flags of this update so far
 
-        # -- time update and innovation (combinational from the working registers) -----------
-        tu = AmaranthOps(m, f, prefix="tu_")
-        k = tu.constants(self.constants)
-        x = {n: tu.input(work[n], points[n], n) for n in names}
-        xl1 = eq.predict(tu, x["x1"], x["v"])                                        # xl1 = x1 + v
-        pl = eq.covariance_predict(tu, k, x["p11"], x["p12"], x["p21"], x["p22"])
-        s = eq.innovation_variance(tu, k, pl[0])                                     # S = pl11 + R
-        e = eq.innovation(tu, tu.input(sample, CODE_FORMAT, "y"), xl1)               # e = y - xl1
-        held = [tu.hold(v, n) for v, n in zip((xl1, *pl, e), ("xl1", "pl11", "pl12", "pl21", "pl22", "e"), strict=True)]
-        xl1_r, pl11_r, pl12_r, pl21_r, pl22_r, e_r = (h for h, _ in held)
-        tu_flags = tu.overflow()
+        # -- TU1: the time update, from the working registers ----------------------------------
+        tu1 = AmaranthOps(m, f, prefix="tu1_")
+        k = tu1.constants(self.constants)
+        x = {n: tu1.input(work[n], points[n], n) for n in names}
+        xl1 = eq.predict(tu1, x["x1"], x["v"])                                        # xl1 = x1 + v
+        pl = eq.covariance_predict(tu1, k, x["p11"], x["p12"], x["p21"], x["p22"])   # P' = Phi P Phi^T + Q'
+        held1 = [tu1.hold(v, n) for v, n in zip((xl1, *pl), ("xl1", "pl11", "pl12", "pl21", "pl22"), strict=True)]
+        xl1_r, pl11_r, pl12_r, pl21_r, pl22_r = (h for h, _ in held1)
 
-        # divider operands: |pl| << shift over S; S <= 0 becomes a zero divisor (saturates)
-        def dividend(pl_value):
+        # -- TU2: S, the innovation, the dividends ----------------------------------------------
+        tu2 = AmaranthOps(m, f, prefix="tu2_")
+        s = eq.innovation_variance(tu2, k, pl11_r)                                    # S = pl11 + R
+        e = eq.innovation(tu2, tu2.input(sample, CODE_FORMAT, "y"), xl1_r)            # e = y - xl1
+        e_r, e_assign = tu2.hold(e, "e")
+
+        def dividend(pl_value):  # |pl| << shift: the divider works on magnitudes
             magnitude = Mux(pl_value < 0, -pl_value, pl_value).as_unsigned()
             return magnitude.shift_left(self.div_shift)[:self.dividend_bits]
 
-        divisor = Mux(s.raw > 0, s.raw.as_unsigned(), 0)
+        num1, num2 = Signal(self.dividend_bits, name="num1"), Signal(self.dividend_bits, name="num2")
+        den = Signal(f["s"].width, name="den")
         m.d.comb += [
-            div1.i.payload.dividend.eq(dividend(pl[0].raw)),
-            div1.i.payload.divisor.eq(divisor),
-            div2.i.payload.dividend.eq(dividend(pl[2].raw)),
-            div2.i.payload.divisor.eq(divisor),
-            div1.o.ready.eq(1),
-            div2.o.ready.eq(1),
+            div1.i.payload.dividend.eq(num1), div1.i.payload.divisor.eq(den),
+            div2.i.payload.dividend.eq(num2), div2.i.payload.divisor.eq(den),
+            div1.o.ready.eq(1), div2.o.ready.eq(1),
         ]
 
-        # -- gains: truncation toward zero (the dividers work on magnitudes) ---------------------
+        # -- gains: truncation toward zero, the sign back from the numerator ----------------------
         k1 = Signal(signed(f["gain"].width))
         k2 = Signal(signed(f["gain"].width))
 
         def signed_quotient(result, numerator):
             return Mux(numerator < 0, -result.quotient, result.quotient)
 
-        # -- products (registered) and write-back (combinational from them) ----------------------
+        # -- MUL: the products (registered); WB: the sums, from the registered products ----------
         mul = AmaranthOps(m, f, prefix="mul_")
         g1, g2 = mul.input(k1, "gain", "K1"), mul.input(k2, "gain", "K2")
         k1e, k2e, pk = eq.full_products(mul, g1, g2, e_r, pl11_r, pl12_r)
         products = [mul.hold(v, n) for v, n in zip((k1e, k2e, *pk), ("k1e", "k2e", "k1p11", "k1p12", "k2p11", "k2p12"),
                                                    strict=True)]
         k1e_r, k2e_r, *pk_r = (p for p, _ in products)
-        wb_ops = AmaranthOps(m, f, prefix="wb_")
-        x1_n = eq.correct(wb_ops, xl1_r, k1e_r, "x1")                                # x1 = xl1 + K1 e
-        v_n = eq.correct(wb_ops, x["v"], k2e_r, "v")                                 # v = v + K2 e
-        p_n = eq.covariance_correct(wb_ops, (pl11_r, pl12_r, pl21_r, pl22_r), pk_r)   # P = P' - K C P'
-        x2_n = eq.rate(wb_ops, wb_ops.constants(self.constants), v_n)                # x2 = v / T
-        wb_flags = Signal()
-        m.d.comb += wb_flags.eq(flags | wb_ops.overflow())
+        wb = AmaranthOps(m, f, prefix="wb_")
+        x1_n = eq.correct(wb, xl1_r, k1e_r, "x1")                                     # x1 = xl1 + K1 e
+        v_n = eq.correct(wb, x["v"], k2e_r, "v")                                      # v = v + K2 e
+        p_n = eq.covariance_correct(wb, (pl11_r, pl12_r, pl21_r, pl22_r), pk_r)       # P = P' - K C P'
         next_state = dict(zip(names, (x1_n, v_n, *p_n), strict=True))
+        # the flags of WB are registered one by one and ORed in the next cycle: an OR tree
+        # after the saturations would lengthen WB's path by two LUT levels
+        wb_bits = Signal(len(wb.flags), name="wb_flags")
+
+        # -- x2 = v / T from the new v: free when T = 2**k, else three steps ---------------------
+        v_done = Signal(signed(f["v"].width), name="v_done")
+        x1_done = Signal(signed(f["x1"].width), name="x1_done")
+        v_done_fx = Fx(v_done, f["v"].frac_bits, None, f["v"], "v")
+        rate_ops = [AmaranthOps(m, f, prefix=f"x{n}_") for n in range(1, 4)]
+        if self.rate_steps:
+            operand, op_assign = rate_ops[0].hold(eq.rate_operand(rate_ops[0], k, v_done_fx), "vt")
+            product, pr_assign = rate_ops[1].hold(eq.rate_product(rate_ops[1], k, operand), "vt_inv_t")
+            x2_n = eq.rate_write(rate_ops[2], k, product)
+            rate_flags = [rate_ops[0].overflow(), Const(0, 1), rate_ops[2].overflow()]
+        else:
+            x2_n = eq.rate(rate_ops[0], k, v_done_fx)
+            rate_flags = [rate_ops[0].overflow()]
 
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
+
+        self.flag_outputs(m, 3)
+
+        def emit(x2, *extra_flags):
+            with m.If(~self.o.valid | self.o.ready):
+                m.d.sync += self.o.valid.eq(1)
+                write_estimate(m, self, channel, {"x1": Fx(x1_done, 0), "x2": x2, "yhat": xl1_r},
+                               [flags, *extra_flags, *[Const(0, 1)] * (2 - len(extra_flags))])
+                m.next = "IDLE"
 
         with m.FSM(name="schedule") as fsm:
             with m.State("IDLE"):
                 with m.If(self.i.valid):
                     m.d.sync += [channel.eq(self.i.payload.channel), sample.eq(self.i.payload.y)]
                     m.d.sync += [work[n].eq(select(regs[n], self.i.payload.channel)) for n in names]
-                    m.next = "TU"
-            with m.State("TU"):
-                m.d.sync += [assign for _, assign in held]
-                m.d.sync += flags.eq(tu_flags)
+                    m.next = "TU1"
+            with m.State("TU1"):
+                m.d.sync += [assign for _, assign in held1]
+                m.d.sync += flags.eq(tu1.overflow())
+                m.next = "TU2"
+            with m.State("TU2"):
+                m.d.sync += [e_assign, flags.eq(flags | tu2.overflow()),
+                             num1.eq(dividend(pl11_r.raw)), num2.eq(dividend(pl21_r.raw)),
+                             den.eq(Mux(s.raw > 0, s.raw.as_unsigned(), 0))]  # S <= 0: a zero divisor (saturates)
+                m.next = "GO"
+            with m.State("GO"):
                 m.next = "DIV"
             with m.State("DIV"):
                 with m.If(div1.o.valid):  # both dividers finish in the same cycle
@@ -258,23 +425,33 @@ class FullKalman(_Core):
                 m.d.sync += [assign for _, assign in products]
                 m.next = "WB"
             with m.State("WB"):
-                with m.If(~self.o.valid | self.o.ready):
-                    m.d.sync += [at(regs[n], channel).eq(next_state[n].raw) for n in names]
-                    m.d.sync += self.o.valid.eq(1)
-                    write_estimate(m, self, channel, {"x1": x1_n, "x2": x2_n, "yhat": xl1_r}, wb_flags)
-                    m.next = "IDLE"
+                m.d.sync += [at(regs[n], channel).eq(next_state[n].raw) for n in names]
+                m.d.sync += [v_done.eq(v_n.raw), x1_done.eq(x1_n.raw), wb_bits.eq(Cat(*(f for _, f in wb.flags)))]
+                m.next = "X1"
+            with m.State("X1"):
+                if self.rate_steps:
+                    m.d.sync += [op_assign, flags.eq(flags | wb_bits.any() | rate_flags[0])]
+                    m.next = "X2"
+                else:
+                    emit(x2_n, wb_bits.any(), rate_flags[0])
+            if self.rate_steps:
+                with m.State("X2"):
+                    m.d.sync += pr_assign
+                    m.next = "X3"
+                with m.State("X3"):
+                    emit(x2_n, rate_flags[2])
         # plain assignments (Verilog `assign`), not case-statement outputs: no simulator can
         # leave them undefined at time zero while the state has not changed yet
         m.d.comb += [
             self.i.ready.eq(fsm.ongoing("IDLE")),
-            div1.i.valid.eq(fsm.ongoing("TU")),
-            div2.i.valid.eq(fsm.ongoing("TU")),
+            div1.i.valid.eq(fsm.ongoing("GO")),
+            div2.i.valid.eq(fsm.ongoing("GO")),
         ]
         return m
 
 
 def make_core(config, variant, *, channels=1):
-    """The core of ``variant`` ("steady" or "full")."""
+    """The core of ``variant`` ("steady" or "full"), each with the stages that meet 50 MHz."""
     if variant == "steady":
         return SteadyKalman(config, channels=channels)
     if variant == "full":

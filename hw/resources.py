@@ -18,8 +18,10 @@ Two things differ from what Quartus will build, and the flow corrects for both:
 The logic-cell figure comes from the carry-aware netlist too: LUT4s, plus one logic element
 per adder bit (a Cyclone LE in arithmetic mode makes a sum bit and its carry), plus flip-flops,
 less the flip-flops fed by a LUT or adder bit that drives nothing else (Quartus packs such a
-pair into one logic element). ``luts`` is the plain LUT4 count of the ``synth_intel`` netlist,
-an upper bound, since it builds each adder bit from two LUTs.
+pair into one logic element) and less those fed straight by a product (they are the embedded
+multiplier's output register, Cyclone II Device Handbook vol. 1, "Embedded Multipliers").
+``luts`` is the plain LUT4 count of the ``synth_intel`` netlist, an upper bound, since it
+builds each adder bit from two LUTs.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ import tempfile
 from collections import defaultdict
 from pathlib import Path
 
+from kfpga.hw.timing import analyse
 from kfpga.tools import yosys_command
 
 __all__ = ["EP2C20", "estimate", "longest_path"]
@@ -216,11 +219,13 @@ def _logic_cells(carry):
     """Logic-element estimate from the carry-aware netlist (see module docstring)."""
     cells = carry["cells"].values()
     readers = _readers(carry)
-    logic_bits = {}
+    logic_bits, product_bits = {}, set()
     luts = alu_bits = ff_bits = packed = 0
     for c in cells:
         t = c["type"]
-        if t == "$lut":
+        if t == "kfpga_mul":
+            product_bits.update(b for b in c["connections"]["Y"] if isinstance(b, int))
+        elif t == "$lut":
             luts += 1
             for bit in c["connections"]["Y"]:
                 logic_bits[bit] = True
@@ -233,6 +238,8 @@ def _logic_cells(carry):
             d = c["connections"].get("D", [])
             ff_bits += len(d)
             packed += sum(1 for bit in d if isinstance(bit, int) and bit in logic_bits and readers[bit] == 1)
+            # a register right after a multiplier is the embedded multiplier's own output register
+            packed += sum(1 for bit in d if isinstance(bit, int) and bit in product_bits and readers[bit] == 1)
     return luts + alu_bits + ff_bits - packed
 
 
@@ -246,8 +253,12 @@ def _memory_bits(log):
     return bits
 
 
-def estimate(verilog, top, *, work_dir=None):
-    """Synthesise ``verilog`` (top module ``top``) and return the resource figures."""
+def estimate(verilog, top, *, work_dir=None, timing=None):
+    """Synthesise ``verilog`` (top module ``top``) and return the resource figures.
+
+    ``timing``: keyword arguments of :func:`kfpga.hw.timing.analyse` (the clock period and the
+    .sdc's I/O delays); the timing estimate is under ``"timing"``.
+    """
     with tempfile.TemporaryDirectory(dir=work_dir) as tmp:
         tmp = Path(tmp)
         (tmp / "kfpga_mul.v").write_text(_MUL_BLACKBOX)
@@ -273,7 +284,12 @@ def estimate(verilog, top, *, work_dir=None):
 
     no_carry, _ = longest_path(synth, lut_cost)
     levels, where = longest_path(carry, carry_cost)
+    sta = analyse(carry, **(timing or {})).as_dict()
     return {
+        "timing": sta,
+        "fmax_mhz_estimate": sta["fmax_mhz_estimate"],
+        "worst_path_ns": sta["worst_path_ns"],
+        "worst_path": sta["worst_path"],
         "luts": luts,
         "ffs": ffs,
         "logic_cells": les,

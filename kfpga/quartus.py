@@ -165,7 +165,8 @@ def _sdc_values(ratio):
                        f"{1000 / figure('tC1'):.3g} MHz at most (tC1 = {figure('tC1'):g} ns)")
     budget = sys_period * TCO_FRACTION
     return {
-        "sys_mhz": f"{SYSTEM_MHZ:g}", "sys_period": f"{sys_period:.3f}", "ratio": ratio, "ratio_minus_1": ratio - 1,
+        "sys_mhz": f"{SYSTEM_MHZ:g}", "sys_period": f"{sys_period:.3f}", "ratio": ratio,
+        "ratio_minus_1": ratio - 1, "ratio_minus_2": ratio - 2,
         "adc_mhz": f"{1000 / adc_period:g}", "adc_period": f"{adc_period:g}", "tc1": f"{figure('tC1'):g}",
         "td9": f"{figure('tD9'):g}", "addr_setup": f"{adc_period - sys_period:g}", "tco_budget": f"{budget:g}",
         "ctl_out_max": f"{sys_period - budget:.3f}", "tacc": f"{figure('tACC'):g}", "board": f"{BOARD_NS:g}",

@@ -47,7 +47,8 @@ from kfpga.model.ranges import float_ranges, full_scale_stimulus
 from kfpga.model.reference import KalmanParams, kalman_decomposed, steady_state, steady_state_gain
 from kfpga.spec import FilterSpec, Output, Point, Variant
 
-__all__ = ["SPEC", "POINTS", "t_exponent", "steady_gain", "predict", "innovation", "correct", "rate",
+__all__ = ["SPEC", "POINTS", "t_exponent", "steady_gain", "predict", "innovation", "correct", "rate", "rate_operand",
+           "rate_product", "rate_write",
            "covariance_predict", "innovation_variance", "gains", "covariance_correct", "steady_update",
            "full_update"]
 
@@ -101,12 +102,27 @@ def correct(ops, x, ke, point):
     return ops.rq(ops.add(x, ke), point)
 
 
+def rate_operand(ops, k, v):
+    """The first step of x2 = v / T: v with its binary point moved by k when T = 2**k, else v
+    rounded into the 18-bit multiplier operand vt."""
+    if k["t_shift"] is not None:
+        return ops.shift(v, -k["t_shift"])
+    return ops.rq(v, "vt")
+
+
+def rate_product(ops, k, vt):
+    """The second step: nothing when T = 2**k, else the product vt * (1/T)."""
+    return vt if k["t_shift"] is not None else ops.mul(vt, k["inv_t"])
+
+
+def rate_write(ops, k, value):
+    """The last step: the rate written into x2."""
+    return ops.rq(value, "x2")
+
+
 def rate(ops, k, v):
     """x2 = v / T: the binary point moved when T = 2**k, else [v]_vt * (1/T)."""
-    if k["t_shift"] is not None:
-        return ops.rq(ops.shift(v, -k["t_shift"]), "x2")
-    vt = ops.rq(v, "vt")                                            # the 18-bit operand of the product
-    return ops.rq(ops.mul(vt, k["inv_t"]), "x2")                    # x2 = vt * (1/T)
+    return rate_write(ops, k, rate_product(ops, k, rate_operand(ops, k, v)))
 
 
 def covariance_predict(ops, k, p11, p12, p21, p22):

@@ -23,7 +23,11 @@ async def core_bit_exact(dut):
     n = int(p.get("samples", 2000))
     codes = stress_codes(p["seed"], n)
     rng = np.random.default_rng(p["seed"] + 2)
-    channels = rng.integers(0, p.get("channels", 1), n) if p.get("channels", 1) > 1 else np.zeros(n, dtype=int)
+    count = p.get("channels", 1)
+    if p.get("order") == "round-robin":  # channels in turn: what a C-slow core takes at full rate
+        channels = np.arange(n) % count
+    else:
+        channels = rng.integers(0, count, n) if count > 1 else np.zeros(n, dtype=int)
     await tb.reset()
     start_ns = get_sim_time("ns")
     t0 = time.perf_counter()

@@ -50,6 +50,7 @@ class Harness:
         self.outputs = []
         self.timeouts_seen = 0
         self._pending = []
+        self._decoded = False
         self.stop = False
 
     def pins(self, ctx):
@@ -85,8 +86,9 @@ class Harness:
                     ctx.set(c.eoc, value)
                 else:
                     ctx.set(c.data, 0 if value is None else value & 0xFFFF)
-            if strobe:  # the word and state of the period that starts now
-                self.periods.append((ctx.get(c.state), ctx.get(c.word.as_value())))
+            if self._decoded:  # the word and state of the period that started: the word is decoded
+                self.periods.append((ctx.get(c.state), ctx.get(c.word.as_value())))  # one cycle after the strobe
+            self._decoded = strobe
 
     def run(self, script, *, deadline_cycles=200000):
         sim = Simulator(self.top)

@@ -178,6 +178,8 @@ def test_illegal_state_recovers(illegal, seed):
     async def script(ctx, h):
         await wait_outputs(ctx, h, 1)
         await wait_state(ctx, h, 7)
+        for _ in range(3):  # somewhere inside the period, after its word was decoded
+            await ctx.tick()
         ctx.set(top.ctrl.state, illegal)  # an upset flips the state register mid-period
         forced["period"] = len(h.periods)  # the next period starts at the next strobe
         await wait_outputs(ctx, h, 3)

@@ -130,7 +130,7 @@ def test_declared_latency_and_cycles_per_update_are_measured(name, variant):
         ctx.set(dut.o.ready, 1)
         ctx.set(dut.i.valid, 1)
         ctx.set(getattr(dut.i.payload, first_input), 100)
-        for cycle in range(10 * dut.cycles_per_update + 20):
+        for cycle in range(12 * dut.cycles_per_update + 20):
             _, _, ready, valid = await ctx.tick().sample(dut.i.ready, dut.o.valid)
             if ready:
                 accepted.append(cycle)
@@ -140,7 +140,8 @@ def test_declared_latency_and_cycles_per_update_are_measured(name, variant):
     sim.add_testbench(bench)
     run_with_deadline(sim, 10 * dut.cycles_per_update + 100)
     assert produced[0] - accepted[0] == dut.latency
-    assert np.all(np.diff(accepted[:5]) == dut.cycles_per_update)
+    # once an input register has filled, inputs are taken and estimates given once per update
+    assert np.all(np.diff(accepted[3:8]) == dut.cycles_per_update)
     assert np.all(np.diff(produced[:5]) == dut.cycles_per_update)
 
 
