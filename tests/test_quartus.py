@@ -203,6 +203,10 @@ def test_resource_report_is_consistent(tmp_path, capsys):
         assert r["lut_levels"] <= r["lut_levels_no_carry"]
         assert r["longest_path_ends_at"], "the report names where the longest path ends"
         assert r["whole_design"]["logic_cells"] > r["logic_cells"]  # the ADC front end costs something
+    for r in (steady, full):  # the timing goal: 75 MHz estimated on the -8 part, core and whole design
+        assert r["fmax_mhz_estimate"] >= 75 and r["whole_design"]["fmax_mhz_estimate"] >= 75, r["worst_path"]
+        assert r["worst_path"]["start"] and r["worst_path"]["end"] and r["worst_path"]["steps"]
+        assert all(p["delay_ns"] <= p["budget_ns"] for p in r["whole_design"]["timing"]["io_paths"])
     assert steady["mul18"] < full["mul18"]
     assert steady["logic_cells"] < full["logic_cells"] and steady["ffs"] < full["ffs"]
     # the multipliers the designs have: K1 e, K2 e; and those plus K1 pl11, K1 pl12, K2 pl11, K2 pl12
@@ -215,3 +219,20 @@ def test_t_not_a_power_of_two_costs_one_multiplier(tmp_path):
 
     path, _ = write_block(tmp_path, "core", FilterConfig(params=KalmanParams(T=0.3)), variant="steady")
     assert estimate(path, path.stem)["mul18"] == 3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("variant", ["steady", "full"])
+def test_six_channels_meet_the_timing_goal(variant, capsys):
+    assert main(["resources", "--variant", variant, "--channels", "6", "--json", "--quiet"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert r["fmax_mhz_estimate"] >= 75 and r["whole_design"]["fmax_mhz_estimate"] >= 75
+    assert r["all_goals_met"], {k: m for k, m in r["goals_met"].items() if not m}
+
+
+@pytest.mark.slow
+def test_ecp5_place_and_route_agrees_the_loop_is_short(capsys):
+    """A real place-and-route on another family: the pipelined steady core runs well above 50 MHz."""
+    assert main(["resources", "--variant", "steady", "--ecp5", "--json", "--quiet"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert r["ecp5_fmax_mhz"] > 75 and r["whole_design"]["ecp5_fmax_mhz"] > 75
