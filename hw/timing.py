@@ -60,6 +60,8 @@ DELAYS = {
               "FloPoCo CycloneII.hpp multiplierDelay_[1] (Quartus 11.1)", "source"),
         Delay("t_mul9", "9x9 embedded multiplier, unregistered", 2.181, "FloPoCo CycloneII.hpp multiplierDelay_[0]",
               "source"),
+        Delay("t_mul_reg", "a multiplier's own input or output register, clock to output (such a register costs no LE)",
+              0.104, "FloPoCo CycloneII.hpp: the 18x18 figure \"contains the DSP output register = 0.104ns\"", "source"),
         Delay("t_route_mul", "routing between logic and a multiplier", 0.765, "FloPoCo CycloneII.hpp DSPToLogicWireDelay",
               "source"),
         Delay("t_m4k", "M4K read, clock to data", 3.245, "FloPoCo CycloneII.hpp RAMDelay_ (Quartus 11.1)", "source"),
