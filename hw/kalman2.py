@@ -33,7 +33,7 @@ __all__ = ["SteadyKalman", "FullKalman", "make_core"]
 
 def _signature(config, channels):
     return {
-        "i": In(stream.Signature(input_layout(config.spec, channels))),
+        "i": In(stream.Signature(input_layout(config, channels))),
         "o": Out(stream.Signature(output_layout(config, channels))),
         "overflow": Out(1),
     }

@@ -102,18 +102,16 @@ class AdcFrontend(wiring.Component):
 
 def out_field(config, name=None):
     """The output field that drives ``out_data`` (default: the filter's), checked."""
-    spec = config.spec
-    name = spec.default_output if name is None else name
-    if name not in spec.output_names:
-        raise ValueError(f"out_field must be one of {', '.join(spec.output_names)} for the {spec.name} filter, "
+    name = config.spec.default_output if name is None else name
+    if name not in config.output_names:
+        raise ValueError(f"out_field must be one of {', '.join(config.output_names)} for the {config.filter} filter, "
                          f"not {name!r}")
     return name
 
 
 def out_width(config, name=None):
     """Bits of ``out_data``: the width of the chosen field's format."""
-    spec = config.spec
-    return config.formats[spec.output(out_field(config, name)).point].width
+    return config.output_format(out_field(config, name)).width
 
 
 class FilterSystem(wiring.Component):
@@ -144,8 +142,8 @@ class FilterSystem(wiring.Component):
     def __init__(self, config, *, variant=None, six_channel=False, channel=0, ratio=10, timeout_periods=40,
                  out_field=None):
         spec = config.spec
-        if len(spec.inputs) != 1:
-            raise ValueError(f"the {spec.name} filter takes {len(spec.inputs)} samples per update; the board top "
+        if len(config.inputs) != 1:
+            raise ValueError(f"the {spec.name} filter takes {len(config.inputs)} samples per update; the board top "
                              "feeds one ADC channel per update")
         self.config = config
         self.variant = spec.default_variant if variant is None else variant
@@ -173,7 +171,7 @@ class FilterSystem(wiring.Component):
             else:
                 m.d.comb += pin.eq(inner)
         # the controller's (ADC channel, sample) words feed the core's (channel state, y) input
-        sample_name = self.config.spec.inputs[0][0]
+        sample_name = self.config.inputs[0]
         m.d.comb += [
             core.i.valid.eq(frontend.o.valid),
             frontend.o.ready.eq(core.i.ready),

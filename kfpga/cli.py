@@ -119,7 +119,7 @@ def _info(text):
     print(text, file=sys.stderr)
 
 
-def _samples_for(args, params, *, command, need_truth=False):
+def _samples_for(args, config, *, command, need_truth=False):
     """``(truth, y, label)`` from ``--input`` or the chosen scenario.
 
     Everything is checked before anything is printed (the seed, notes about the file), so a
@@ -155,7 +155,7 @@ def _samples_for(args, params, *, command, need_truth=False):
     if not args.input:
         args.seed = _pick_seed(args.seed)
         notes.append(f"seed {args.seed} (replay with --seed {args.seed})")
-        truth, y = scenarios.make(args.scenario, n, args.seed, params)
+        truth, y = scenarios.for_config(args.scenario, n, args.seed, config)
         label = f"scenario {args.scenario}"
     for note in notes:
         _info(note)
@@ -181,7 +181,8 @@ def _variant_help():
 def _out_field_help():
     from kfpga import registry
 
-    parts = [f"{s.name}: {', '.join(s.output_names)}, default {s.default_output}" for s in registry.specs()]
+    parts = [f"{s.name}: {', '.join(o.name for o in s.outputs_for(s.params()))}, default {s.default_output}"
+             for s in registry.specs()]
     return f"the output field that drives out_data ({'; '.join(parts)}); the pin table follows its width"
 
 
@@ -218,7 +219,7 @@ def _run_compare(args):
     _check_signal_args(args)
     args.plot = _check_plot(args.plot)
     config = _load_config(args)
-    truth, y, label = _samples_for(args, config.params, command="compare")
+    truth, y, label = _samples_for(args, config, command="compare")
     result = compare(config, args.variant, y, truth, settle=args.settle, seed=args.seed if not args.input else None,
                      scenario=None if args.input else args.scenario)
     m = result.metrics
@@ -261,7 +262,7 @@ def _run_sweep(args):
     if config.pinned:
         raise UsageError(f"sweep sets every format itself, so the formats {args.config} pins would be ignored "
                          f"({', '.join(config.pinned)}): remove its [formats] tables, or use compare")
-    truth, y, label = _samples_for(args, config.params, command="sweep", need_truth=True)
+    truth, y, label = _samples_for(args, config, command="sweep", need_truth=True)
     rows, narrowest = sweep(
         config.params, args.variant, y, truth, args.bits, settle=args.settle, range_source=args.ranges,
         progress=lambda it: tqdm(it, desc="sweep", unit="width", file=sys.stderr, disable=args.quiet),
@@ -493,7 +494,7 @@ def _run_resources(args):
         io = results["whole_design"]["timing"]["io_paths"]
         met["io_paths_within_budget"] = all(p["delay_ns"] <= p["budget_ns"] for p in io)
         goals["io_paths_within_budget"] = True
-    trimmed = [name for name in config.spec.output_names if name != top.out_field]
+    trimmed = [name for name in config.output_names if name != top.out_field]
     note = (f"the whole design routes only {top.out_field} to out_data, so synthesis removes the logic that only "
             f"{', '.join(trimmed)} need{'s' if len(trimmed) == 1 else ''}: it can count fewer cells than the core "
             "alone") if trimmed else None
@@ -657,7 +658,8 @@ def _run_filters(args):
     from kfpga import registry
 
     rows = [{"name": s.name, "summary": s.summary, "variants": {n: v.summary for n, v in s.variants.items()},
-             "inputs": [n for n, _ in s.inputs], "outputs": list(s.output_names), "source": s.source,
+             "inputs": [n for n, _ in s.inputs_for(s.params())],
+             "outputs": [o.name for o in s.outputs_for(s.params())], "source": s.source,
              "default": s.name == registry.DEFAULT} for s in registry.specs()]
     if args.json:
         _emit_json(rows)

@@ -125,6 +125,31 @@ class FilterConfig:
     def ranges(self):
         return analysed_ranges(self.params, filter=self.filter)
 
+    # -- the model's interface ----------------------------------------------------------
+    @property
+    def inputs(self):
+        """The names of the samples of one update (``("y",)`` for one observation)."""
+        return tuple(name for name, _ in self.spec.inputs_for(self.params))
+
+    @property
+    def outputs(self):
+        """The output fields (:class:`~kfpga.spec.Output`), in order."""
+        return self.spec.outputs_for(self.params)
+
+    @property
+    def output_names(self):
+        return tuple(o.name for o in self.outputs)
+
+    def output(self, name):
+        """The output field ``name``; ``KeyError`` if this model has none."""
+        for o in self.outputs:
+            if o.name == name:
+                return o
+        raise KeyError(name)
+
+    def output_format(self, name):
+        return self.formats[self.output(name).point]
+
     def constants(self, variant):
         """``{name: (value, point) | structural}`` of ``variant`` (see :class:`~kfpga.spec.Variant`)."""
         return self.spec.variants[variant].constants(self.params)
@@ -175,7 +200,7 @@ class FilterConfig:
         x = {name: ops.input(None, point, name) for name, point in v.state}
         from kfpga.ads8364 import CODE_FORMAT
 
-        u = {name: ops.input(None, CODE_FORMAT, name) for name, _ in self.spec.inputs}
+        u = {name: ops.input(None, CODE_FORMAT, name) for name in self.inputs}
         v.update(ops, k, x, u)
         return ops.report
 

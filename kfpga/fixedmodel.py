@@ -76,8 +76,8 @@ class FixedModel:
         self.variant = self.spec.default_variant if variant is None else variant
         self.config.require_variant(self.variant)
         self._v = self.spec.variants[self.variant]
-        self.inputs = tuple(name for name, _ in self.spec.inputs)
-        self.outputs = self.spec.output_names
+        self.inputs = self.config.inputs
+        self.outputs = self.config.output_names
         self.state_names = tuple(name for name, _ in self._v.state)
         self.reset = self.config.reset_state(self.variant)
         self.constants = self.config.constants(self.variant)
@@ -229,7 +229,7 @@ class FixedModel:
         return outs, overflow, states
 
     def output_format(self, name):
-        return self.config.formats[self.spec.output(name).point]
+        return self.config.output_format(name)
 
     def to_float(self, result):
         """``{output: float array}`` of a result, in input units."""

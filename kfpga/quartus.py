@@ -231,7 +231,7 @@ def write_project(out_dir, config, *, variant=None, six_channel=False, channel=0
         "top": TOP_NAME, "family": FAMILY, "device": DEVICE, "device_ordering_code": DEVICE_ORDERING,
         "filter": config.filter, "variant": variant, "channels": 6 if six_channel else 1,
         "channel": None if six_channel else CHANNELS[channel],
-        "out_data": {"field": out_field, "format": str(config.formats[config.spec.output(out_field).point]),
+        "out_data": {"field": out_field, "format": str(config.output_format(out_field)),
                      "width": data_bits},
         "clocks": {"system_mhz": SYSTEM_MHZ, "adc_mhz": float(values["adc_mhz"]), "ratio": ratio},
         "model": _jsonable(dataclasses.asdict(config.params)),

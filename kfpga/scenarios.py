@@ -9,7 +9,7 @@ import numpy as np
 
 from kfpga.ads8364 import CODE_MAX, CODE_MIN
 
-__all__ = ["SCENARIOS", "sine", "random_accel", "adc_codes", "make"]
+__all__ = ["SCENARIOS", "sine", "random_accel", "adc_codes", "make", "for_config"]
 
 #: Demo sine: a quarter of full scale, 2000 samples per period.
 SINE_AMPLITUDE = 8192.0
@@ -55,6 +55,14 @@ def random_accel(n, seed, *, q=2.0, noise_var=4.0, T=1.0, spread=8000.0, batch=(
 
 
 SCENARIOS = {"sine": sine, "random-accel": random_accel}
+
+
+def for_config(name, n, seed, config):
+    """``(truth, codes)`` of scenario ``name`` for a config: its filter's own scenarios when it has
+    them (``FilterSpec.scenario``), else :func:`make` on one input."""
+    if config.spec.scenario is not None:
+        return config.spec.scenario(name, n, seed, config.params)
+    return make(name, n, seed, config.params)
 
 
 def make(name, n, seed, params, batch=()):

@@ -110,9 +110,10 @@ class FilterSpec:
     points:
         Its quantisation points, in datapath order.
     inputs:
-        ``((name, description), ...)``: the samples of one update, each a 16-bit ADC code.
+        ``((name, description), ...)``: the samples of one update, each a 16-bit ADC code; or
+        ``inputs(params) -> that`` when they depend on the parameters.
     outputs:
-        Its output fields, in order.
+        Its output fields, in order; or ``outputs(params) -> that``.
     variants:
         ``{name: Variant}``; the first is the default.
     points_for:
@@ -136,6 +137,12 @@ class FilterSpec:
     random_params:
         ``random_params(rng) -> params``: valid random parameters, for the contract tests'
         random configs (the formats around them are randomised by the tests).
+    scenario:
+        ``scenario(name, n, seed, params) -> (truth of the default output, codes)``: the test
+        signals of ``compare``, ``sweep`` and ``simulate`` (``codes`` an array for one input,
+        else ``{input: array}``); ``None`` uses ``kfpga/scenarios.py`` on one input.
+    presets:
+        ``{name: (summary, params factory)}``: named models, ``--preset NAME``.
     """
 
     name: str
@@ -155,27 +162,29 @@ class FilterSpec:
     goals: Callable
     default_output: str
     random_params: Callable
+    scenario: Callable | None = None
+    presets: Mapping = field(default_factory=dict)
 
     def __post_init__(self):
         object.__setattr__(self, "points", MappingProxyType(dict(self.points)))
         object.__setattr__(self, "variants", MappingProxyType(dict(self.variants)))
-        names = [o.name for o in self.outputs]
+        object.__setattr__(self, "presets", MappingProxyType(dict(self.presets)))
+        names = [o.name for o in self.outputs_for(self.params())]
         if self.default_output not in names:
             raise ValueError(f"default_output must be one of {', '.join(names)}, not {self.default_output!r}")
+
+    def inputs_for(self, params):
+        """``((name, description), ...)`` of a model with these parameters."""
+        return tuple(self.inputs(params) if callable(self.inputs) else self.inputs)
+
+    def outputs_for(self, params):
+        """The output fields of a model with these parameters."""
+        return tuple(self.outputs(params) if callable(self.outputs) else self.outputs)
 
     @property
     def default_variant(self):
         return next(iter(self.variants))
 
-    @property
-    def output_names(self):
-        return tuple(o.name for o in self.outputs)
-
-    def output(self, name):
-        for o in self.outputs:
-            if o.name == name:
-                return o
-        raise KeyError(name)
 
     def make_core(self, config, variant, *, channels=1):
         """The Amaranth core of ``variant`` (imports the RTL module on first use)."""

@@ -48,9 +48,9 @@ def float_ranges(spec, params, variants, stimulus):
     ``stimulus`` is ``{input name: array (rows, steps)}``, or one array when the filter has one
     input. The reset state counts as a value of its point; so do the constants.
     """
+    names = [name for name, _ in spec.inputs_for(params)]
     if not isinstance(stimulus, dict):
-        stimulus = {spec.inputs[0][0]: np.atleast_2d(np.asarray(stimulus, dtype=np.float64))}
-    names = [name for name, _ in spec.inputs]
+        stimulus = {names[0]: np.atleast_2d(np.asarray(stimulus, dtype=np.float64))}
     rows = [np.asarray(stimulus[n], dtype=np.float64) for n in names]
     ranges = {}
 

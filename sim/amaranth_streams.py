@@ -115,11 +115,11 @@ def run_core(config, variant, y, *, seed, channels=1, p_idle=0.0, p_ready=1.0):
     ch = rng.integers(0, channels, len(y)) if channels > 1 else np.zeros(len(y), dtype=np.int64)
     spec = config.spec
     dut = spec.make_core(config, variant, channels=channels)
-    name = spec.inputs[0][0]
+    name = config.inputs[0]
     payloads = [{"channel": int(c), name: int(s)} for c, s in zip(ch, y, strict=True)]
     out = run_stream(dut, payloads, seed=seed, p_idle=p_idle, p_ready=p_ready, extra_cycles=50)
     board = Scoreboard(config, variant)
-    fields = ("channel", *spec.output_names, "overflow")
+    fields = ("channel", *config.output_names, "overflow")
     got = {f: np.array([int(getattr(o, f)) for o in out]) for f in fields}
     for c, s in zip(ch, y, strict=True):
         board.add_input(c, int(s))

@@ -140,7 +140,7 @@ class CoreTB:
         self.channels = int(params.get("channels", 1))
         seed = params["seed"]
         dut._log.info(f"seed {seed}")
-        self.source = StreamSource(dut, "i", dut.clk, input_layout(self.config.spec, self.channels),
+        self.source = StreamSource(dut, "i", dut.clk, input_layout(self.config, self.channels),
                                    rng=random.Random(seed), p_idle=params.get("p_idle", 0.0))
         self.sink = StreamSink(dut, "o", dut.clk, output_layout(self.config, self.channels),
                                rng=random.Random(seed + 1), p_ready=params.get("p_ready", 1.0))
@@ -249,7 +249,7 @@ class SystemTB:
         reads = self.adc.reads[:n]
         channels = np.array([r.channel for r in reads])
         codes = np.array([r.code for r in reads], dtype=np.int64)
-        fmt = self.config.formats[self.config.spec.output(self.field).point]
+        fmt = self.config.output_format(self.field)
         hw = fmt.to_float([o[2] for o in self.outputs[:n]])
         flt = _per_channel_float(self.config, self.variant, channels, codes, self.field)
         out = {

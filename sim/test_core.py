@@ -31,7 +31,7 @@ async def core_bit_exact(dut):
     await tb.reset()
     start_ns = get_sim_time("ns")
     t0 = time.perf_counter()
-    name = tb.config.spec.inputs[0][0]
+    name = tb.config.inputs[0]
     words = [{"channel": int(c), name: int(v)} for c, v in zip(channels, codes, strict=True)]
     await with_timeout(pump(dut.clk, tb.source, tb.sink, words), 100 * n * 25 + 1000, "ns")
     wall = time.perf_counter() - t0

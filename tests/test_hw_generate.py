@@ -58,7 +58,7 @@ def test_ports_are_the_documented_pins(top_verilog):
     header = re.search(rf"^module {TOP_NAME}\((.*?)\);", text, re.MULTILINE | re.DOTALL)[1]
     names = {p.strip() for p in header.split(",")}
     assert names == set(PORTS)
-    width = top.config.formats[top.config.spec.output(top.out_field).point].width
+    width = top.config.output_format(top.out_field).width
     for name, (direction, bits, _) in PORTS.items():
         bits = width if name == "out_data" else bits
         decl = "input" if direction == "in" else "output"
