@@ -14,67 +14,20 @@ ADC controller only produces valid ones.
 
 from __future__ import annotations
 
-from functools import reduce
+from types import MappingProxyType
+from typing import ClassVar
 
 from amaranth import Cat, Const, Module, Mux, Signal, signed
-from amaranth.lib import stream, wiring
-from amaranth.lib.wiring import In, Out
 
 from kfpga.ads8364 import CODE_FORMAT
 from kfpga.hw.arith import AmaranthOps
+from kfpga.hw.core import Core, LoopPipeline, write_estimate
 from kfpga.hw.divider import Divider
-from kfpga.hw.layouts import input_layout, output_layout
-from kfpga.hw.storage import at, check_channels, select, state_array
+from kfpga.hw.storage import at, select
 from kfpga.model import kalman2 as eq
 from kfpga.ops import Fx, divider_shift, quotient_bits
 
 __all__ = ["SteadyKalman", "FullKalman", "make_core"]
-
-
-def _signature(config, channels):
-    return {
-        "i": In(stream.Signature(input_layout(config, channels))),
-        "o": Out(stream.Signature(output_layout(config, channels))),
-        "overflow": Out(1),
-    }
-
-
-def write_estimate(m, core, channel, outputs, flags):
-    """Register the estimate word on ``core.o``, with the sample's overflow flags (1-bit values).
-
-    The flags are registered one by one and ORed after the register (see :meth:`_Core.flag_outputs`):
-    an OR tree after the saturations would lengthen the last stage's path by its depth.
-    """
-    m.d.sync += [core.o.payload.channel.eq(channel), core.o_flags.eq(Cat(*flags))]
-    m.d.sync += [getattr(core.o.payload, name).eq(value.raw) for name, value in outputs.items()]
-
-
-class _Core(wiring.Component):
-    """What both cores share: config, channel count, the reset state, the stream signature."""
-
-    def __init__(self, config, variant, channels):
-        check_channels(channels)
-        config.require_variant(variant)
-        self.config = config
-        self.variant = variant
-        self.channels = channels
-        self.constants = config.constants(variant)
-        self.reset_state = config.reset_state(variant)
-        super().__init__(_signature(config, channels))
-
-    def flag_outputs(self, m, count):
-        """``o.payload.overflow`` and the sticky ``overflow`` from ``count`` registered flag bits."""
-        self.o_flags = Signal(count, name="o_flags")
-        sticky = Signal(name="sticky")
-        word = Signal(name="word_overflow")
-        m.d.comb += [word.eq(self.o_flags.any()), self.o.payload.overflow.eq(word),
-                     self.overflow.eq(sticky | (self.o.valid & word))]
-        m.d.sync += sticky.eq(self.overflow)
-
-    def _states(self, names):
-        f = self.config.formats
-        points = dict(self.config.spec.variants[self.variant].state)
-        return {n: state_array(self.channels, signed(f[points[n]].width), self.reset_state[n], n) for n in names}
 
 
 def _steady_predict(ops, k, v):
@@ -106,27 +59,20 @@ STEADY_READS = ({"x1", "v"}, {"y", "xl1"}, {"e"}, {"xl1", "v", "k1e", "k2e"})
 CUTS = {1: (), 2: (2,), 3: (1, 3), 4: (1, 2, 3)}
 
 
-class SteadyKalman(_Core):
+class SteadyKalman(LoopPipeline):
     """Steady-state (constant-gain) Kalman core: the loop x -> xl1 -> e -> K e -> x over
-    ``stages`` register stages, channels interleaved.
+    ``stages`` register stages, channels interleaved (:class:`~kfpga.hw.core.LoopPipeline`).
 
     The update is the model's own (``model/kalman2.py``), split into four steps: xl1 = x1 + v;
     e = y - xl1; the products K1 e, T K2 e; x1 = xl1 + K1 e and v = v + T K2 e. A pipeline of
     L stages registers between them (:data:`CUTS`): L = 4 puts one carry chain, or one
-    multiplier, between two registers. A sample enters an input register, reads its
-    channel's state in the first stage, and writes it back at the end of stage L. A sample may
-    follow another of the same channel only once that one has written back (the core stalls
-    its input until then; it never forwards), so:
-
-    * one channel: one sample every L cycles;
-    * C >= L channels in turn (the six ADS8364 channels): one sample per clock across them,
-      each channel's state advancing once per L cycles (C-slow operation);
-    * any order of channels works; a channel repeated within L samples waits.
+    multiplier, between two registers. One channel: one sample every L cycles; C >= L channels
+    in turn (the six ADS8364 channels): one sample per clock across them. Any order works; a
+    channel repeated within L samples waits.
 
     The rate output x2 = v / T is a free shift when T = 2**k; otherwise it takes four more
-    stages after the loop (the new v registered, rounded into the 18-bit operand vt, multiplied
-    by 1/T, rounded into x2), which add latency, not cycles per update. All stages stall together
-    when ``o`` is not ready, so nothing is dropped.
+    steps after the loop (the new v registered, rounded into the 18-bit operand vt, multiplied
+    by 1/T, rounded into x2), which add latency, not cycles per update.
 
     Parameters
     ----------
@@ -140,7 +86,7 @@ class SteadyKalman(_Core):
 
     Members
     -------
-    i : In(stream.Signature(input_layout(spec, channels)))
+    i : In(stream.Signature(input_layout(config, channels)))
         Samples.
     o : Out(stream.Signature(output_layout(config, channels)))
         Estimates, one per sample.
@@ -148,119 +94,28 @@ class SteadyKalman(_Core):
         Sticky: some write saturated (or wrapped) since reset.
     """
 
+    steps = STEADY_STEPS
+    reads = STEADY_READS
+    cuts = CUTS
+    writes: ClassVar[dict] = MappingProxyType({"x1": "x1_next", "v": "v_next"})
+
     def __init__(self, config, *, channels=1, stages=4):
-        if not isinstance(stages, int) or isinstance(stages, bool) or stages not in CUTS:
-            raise ValueError(f"stages must be 1, 2, 3 or 4, not {stages!r}")
-        super().__init__(config, "steady", channels)
-        self.stages = stages
-        self.output_stages = 0 if self.constants["t_shift"] is not None else 4
+        super().__init__(config, "steady", channels=channels, stages=stages)
 
-    @property
-    def latency(self):
-        """Cycles from the input handshake cycle to the first cycle with ``o.valid`` high."""
-        return 1 + self.stages + self.output_stages
+    def outputs(self, live):
+        return {"x1": live["x1_next"], "yhat": live["xl1"], "x2": live["v_next"]}
 
-    @property
-    def cycles_per_update(self):
-        """Cycles from accepting one sample to accepting the next of the same channel (``o`` ready)."""
-        return self.stages
+    def output_steps(self):
+        def on_x2(step):
+            return lambda ops, k, out: {**out, "x2": step(ops, k, out["x2"])}
 
-    def samples_per_clock(self, channels):
-        """Samples per clock with ``channels`` channels in turn: ``min(1, channels / L)``."""
-        return min(1.0, channels / self.stages)
-
-    def elaborate(self, platform):
-        m = Module()
-        f = self.config.formats
-        regs = self._states(("x1", "v"))
-        advance = Signal()
-        m.d.comb += advance.eq(~self.o.valid | self.o.ready)
-
-        # the input register
-        s0_valid = Signal()
-        s0 = Signal.like(self.i.payload, name="s0")
-        hazard = Signal()  # a sample of s0's channel has not written back yet
-        take = Signal()  # s0 moves on (or is empty) and takes the next input
-        m.d.comb += [take.eq(advance & (~s0_valid | ~hazard)), self.i.ready.eq(take)]
-        with m.If(take):
-            m.d.sync += [s0_valid.eq(self.i.valid), s0.eq(self.i.payload)]
-
-        # the loop: groups of steps between registers, the state read in the first
-        live = {"y": Fx(s0.y.as_signed(), 0, None, CODE_FORMAT, "y"),
-                "x1": Fx(select(regs["x1"], s0.channel).as_signed(), f["x1"].frac_bits, None, f["x1"], "x1"),
-                "v": Fx(select(regs["v"], s0.channel).as_signed(), f["v"].frac_bits, None, f["v"], "v")}
-        valid, channel, flags = s0_valid & ~hazard, s0.channel, Const(0, 1)
-        in_flight = []  # (valid, channel) of the samples before their write-back
-        cuts = CUTS[self.stages]
-        groups, start = [], 0
-        for cut in (*cuts, len(STEADY_STEPS)):
-            groups.append(STEADY_STEPS[start:cut])
-            start = cut
-        last_flags = []
-        for n, group in enumerate(groups, start=1):
-            ops = AmaranthOps(m, f, prefix=f"s{n}_")
-            k = ops.constants(self.constants)
-            if STEADY_STEPS[-1] in group and n > 1 and self.channels == 1:
-                # one channel: v is read again from the state, which cannot change before this
-                # write-back (a sample of the same channel waits); it saves a register per
-                # stage, where with several channels the read mux would cost more than it saves
-                live["v"] = Fx(regs["v"][0].as_signed(), f["v"].frac_bits, None, f["v"], "v")
-            for step in group:
-                live = step(ops, k, live)
-            if n == len(groups):
-                last_flags = [f for _, f in ops.flags]
-            else:
-                flags = flags | ops.overflow()
-            if n < len(groups):
-                later = set().union(*STEADY_READS[STEADY_STEPS.index(group[-1]) + 1:])
-                if self.channels == 1:
-                    later.discard("v")
-                live = {name: value for name, value in live.items() if name in later}
-                valid, channel, flags, live = self._register(m, advance, n, valid, channel, flags, live)
-                in_flight.append((valid, channel))
-        # write-back at the end of the last loop stage
-        with m.If(advance & valid):
-            m.d.sync += [at(regs["x1"], channel).eq(live["x1_next"].raw), at(regs["v"], channel).eq(live["v_next"].raw)]
-        m.d.comb += hazard.eq(reduce(lambda a, b: a | b, [v & (c == s0.channel) for v, c in in_flight], Const(0, 1)))
-
-        # the outputs: x2 = v / T in one step (a shift) or three (operand, product, rounding)
-        out = {"x1": live["x1_next"], "yhat": live["xl1"], "x2_part": live["v_next"]}
-        if self.output_stages == 0:
-            out_steps = [lambda ops, k, v: eq.rate(ops, k, v)]
-        else:  # the loop's result registered first: each step then has a cycle to itself
-            out_steps = [lambda ops, k, v: v, eq.rate_operand, eq.rate_product, eq.rate_write]
-        pending = [flags, *last_flags]  # flags not yet ORed into one register bit
-        for n, step in enumerate(out_steps, start=1):
-            ops = AmaranthOps(m, f, prefix=f"o{n}_")
-            out = {**out, "x2_part": step(ops, ops.constants(self.constants), out["x2_part"])}
-            pending += [f for _, f in ops.flags]
-            if n < len(out_steps):
-                combined = reduce(lambda a, b: a | b, pending, Const(0, 1))
-                valid, channel, flags, out = self._register(m, advance, f"o{n}", valid, channel, combined, out)
-                pending = [flags]
-        self.flag_outputs(m, len(pending))
-        with m.If(advance):
-            m.d.sync += self.o.valid.eq(valid)
-            with m.If(valid):
-                write_estimate(m, self, channel, {"x1": out["x1"], "x2": out["x2_part"], "yhat": out["yhat"]}, pending)
-        return m
-
-    @staticmethod
-    def _register(m, advance, tag, valid, channel, flags, live):
-        """A register stage: every live value, the valid bit, the channel and the flags so far."""
-        r_valid, r_flags = Signal(name=f"r{tag}_valid"), Signal(name=f"r{tag}_flags")
-        r_channel = Signal.like(channel, name=f"r{tag}_channel")
-        held = {}
-        with m.If(advance):
-            m.d.sync += [r_valid.eq(valid), r_channel.eq(channel), r_flags.eq(flags)]
-            for name, value in live.items():
-                reg = Signal(signed(len(value.raw)), name=f"r{tag}_{name}")
-                m.d.sync += reg.eq(value.raw)
-                held[name] = Fx(reg, value.frac, value.const, value.fmt, name)
-        return r_valid, r_channel, r_flags, held
+        if self.constants["t_shift"] is not None:
+            return [on_x2(eq.rate)]
+        # the loop's result registered first: each step then has a cycle to itself
+        return [on_x2(lambda ops, k, v: v), on_x2(eq.rate_operand), on_x2(eq.rate_product), on_x2(eq.rate_write)]
 
 
-class FullKalman(_Core):
+class FullKalman(Core):
     """Time-varying Kalman core: the decomposed equations with two restoring dividers.
 
     Schedule per update (one channel at a time), at most one carry chain or one multiplier
@@ -312,7 +167,7 @@ class FullKalman(_Core):
         regs = self._states(names)
         m.submodules.div1 = div1 = Divider(**self._divider_args)
         m.submodules.div2 = div2 = Divider(**self._divider_args)
-        points = dict(self.config.spec.variants["full"].state)
+        points = dict(self.config.spec.variants["full"].state_for(self.config.params))
 
         # working registers of the channel being updated
         channel = Signal.like(self.i.payload.channel)

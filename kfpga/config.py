@@ -24,6 +24,7 @@ from kfpga.errors import ConfigError
 from kfpga.fixed import INT64_SAFE_BITS, QFormat, bits_for, to_raw
 from kfpga.formats import MULTIPLIER_BITS, STATE_FRAC_BITS
 from kfpga.ops import WidthOps
+from kfpga.spec import Constant
 
 __all__ = ["ConfigError", "FilterConfig", "default_formats", "analysed_ranges", "MULTIPLIER_BITS", "STATE_FRAC_BITS"]
 
@@ -156,13 +157,14 @@ class FilterConfig:
 
     def constant_raw(self, variant):
         """``{name: raw int}`` of the quantised constants of ``variant`` (structural entries left out)."""
-        return {name: int(to_raw(c[0], self.formats[c[1]])[0])
-                for name, c in self.constants(variant).items() if isinstance(c, tuple)}
+        fmt = self.formats.get
+        return {name: int(to_raw(c.value, fmt(c.point) if isinstance(c.point, str) else c.point)[0])
+                for name, c in self.constants(variant).items() if isinstance(c, Constant)}
 
     def reset_state(self, variant):
         """``{state name: raw int}``: the reset state of ``variant`` in its points' formats."""
         v = self.spec.variants[variant]
-        points = dict(v.state)
+        points = dict(v.state_for(self.params))
         return {name: int(to_raw(value, self.formats[points[name]])[0]) for name, value in v.initial(self.params).items()}
 
     def replace(self, **changes):
@@ -197,7 +199,7 @@ class FilterConfig:
         v = self.spec.variants[variant]
         ops = WidthOps(self.formats)
         k = ops.constants(v.constants(self.params))
-        x = {name: ops.input(None, point, name) for name, point in v.state}
+        x = {name: ops.input(None, point, name) for name, point in v.state_for(self.params)}
         from kfpga.ads8364 import CODE_FORMAT
 
         u = {name: ops.input(None, CODE_FORMAT, name) for name in self.inputs}
@@ -295,7 +297,9 @@ class FilterConfig:
             "[model]",
         ]
         for f in dataclasses.fields(self.params):
-            lines.append(f"{f.name} = {_toml_value(getattr(self.params, f.name))}")
+            value = getattr(self.params, f.name)
+            # TOML has no null: an unset optional parameter is written as a comment
+            lines.append(f"# {f.name} is not set" if value is None else f"{f.name} = {_toml_value(value)}")
         if not formats:
             lines += ["", "# The formats below are the defaults for these parameters; uncomment one to pin it."]
         mark = "" if formats else "# "

@@ -78,7 +78,8 @@ class FixedModel:
         self._v = self.spec.variants[self.variant]
         self.inputs = self.config.inputs
         self.outputs = self.config.output_names
-        self.state_names = tuple(name for name, _ in self._v.state)
+        self.state = self._v.state_for(self.config.params)
+        self.state_names = tuple(name for name, _ in self.state)
         self.reset = self.config.reset_state(self.variant)
         self.constants = self.config.constants(self.variant)
         self._kernels = {}
@@ -88,7 +89,7 @@ class FixedModel:
         """The compiled loop (see :func:`kfpga.compiled.compile_stage`); built on first use."""
         if vector not in self._kernels:
             self._kernels[vector] = compile_stage(
-                self._v.update, self.config.formats, constants=self.constants, state=self._v.state,
+                self._v.update, self.config.formats, constants=self.constants, state=self.state,
                 inputs=tuple((name, CODE_FORMAT) for name in self.inputs), outputs=self.outputs, vector=vector)
         return self._kernels[vector]
 
@@ -187,7 +188,7 @@ class FixedModel:
         codes = self._codes(y)
         first = next(iter(codes.values()))
         state = self.initial_state(first.shape[:-1]) if state is None else state
-        points = dict(self._v.state)
+        points = dict(self.state)
         x = dict(state.values)
         outs = {name: [] for name in self.outputs}
         overflow = []

@@ -118,9 +118,11 @@ class Ops:
         return Fx(self._const(raw, fmt, value, name or _label(point)), fmt.frac_bits, raw, fmt, name or _label(point))
 
     def constants(self, constants):
-        """A variant's constants (``{name: (value, point) | structural}``) as values of this backend;
+        """A variant's constants (``{name: Constant | structural}``) as values of this backend;
         structural entries pass through unchanged."""
-        return {n: self.const(c[0], c[1], n) if isinstance(c, tuple) else c for n, c in constants.items()}
+        from kfpga.spec import Constant
+
+        return {n: self.const(c.value, c.point, n) if isinstance(c, Constant) else c for n, c in constants.items()}
 
     # -- exact arithmetic ------------------------------------------------------------------
     def _aligned(self, a, b):

@@ -20,6 +20,7 @@ from kfpga.hw.generate import TOP_NAME, write_top
 from kfpga.hw.top import PORTS, out_width
 from kfpga.hw.top import out_field as top_out_field
 from kfpga.paths import read_text
+from kfpga.spec import Constant
 
 __all__ = ["FAMILY", "DEVICE", "DEVICE_ORDERING", "PinError", "PinRow", "load_pins", "port_bits", "check_pins", "io_timing",
            "write_project"]
@@ -246,8 +247,9 @@ def write_project(out_dir, config, *, variant=None, six_channel=False, channel=0
                          "README.txt", "verilator_lint.vlt"]),
     }
     raws = config.constant_raw(variant)
-    manifest["constants"] = {name: {"value": c[0], "raw": raws[name], "format": str(config.formats[c[1]])}
-                             for name, c in config.constants(variant).items() if isinstance(c, tuple)}
+    manifest["constants"] = {name: {"value": c.value, "raw": raws[name],
+                                    "format": str(config.formats[c.point] if isinstance(c.point, str) else c.point)}
+                             for name, c in config.constants(variant).items() if isinstance(c, Constant)}
     (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
     (out_dir / "README.txt").write_text(_readme(variant, six_channel, channel, ratio, manifest))
     return manifest

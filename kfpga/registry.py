@@ -13,6 +13,7 @@ __all__ = ["FILTERS", "DEFAULT", "get", "names", "specs", "spec_for", "register"
 #: ``name -> module`` whose ``SPEC`` is the filter's :class:`~kfpga.spec.FilterSpec`; imported on use.
 FILTERS = {
     "kalman2": "kfpga.model.kalman2",
+    "kalman": "kfpga.model.kalman",
 }
 #: The paper's filter, used when a config or command names none.
 DEFAULT = "kalman2"

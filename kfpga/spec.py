@@ -12,8 +12,17 @@ import importlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
+from typing import NamedTuple
 
-__all__ = ["Point", "Output", "Variant", "FilterSpec"]
+__all__ = ["Point", "Output", "Variant", "FilterSpec", "Constant"]
+
+
+class Constant(NamedTuple):
+    """A constant of an update: a real value, quantised once into the format of ``point`` (a point
+    name or a :class:`~kfpga.fixed.QFormat`)."""
+
+    value: float
+    point: object
 
 
 @dataclass(frozen=True)
@@ -75,11 +84,12 @@ class Variant:
         The ``--variant`` name and a line for ``--help``.
     state:
         ``((name, point), ...)``: the registers the update carries from one sample to the
-        next, each held in the format of its point.
+        next, each held in the format of its point; or ``state(params) -> that``.
     constants:
-        ``constants(params) -> {name: (real value, point) | structural value}``: each pair is
-        quantised once into the point's format, the same integers in the model and the RTL;
-        other entries (a shift amount, a flag) reach the update unchanged.
+        ``constants(params) -> {name: Constant(value, point) | structural value}``: each
+        :class:`Constant` is quantised once into the point's format, the same integers in the
+        model and the RTL; other entries (a shift amount, a size, a flag) reach the update
+        unchanged.
     initial:
         ``initial(params) -> {state name: real value}``: the state after reset.
     update:
@@ -94,6 +104,10 @@ class Variant:
     initial: Callable
     update: Callable
     applies: Callable = field(default=lambda params: None)  # params -> None or why not
+
+    def state_for(self, params):
+        """``((name, point), ...)`` of a model with these parameters."""
+        return tuple(self.state(params) if callable(self.state) else self.state)
 
 
 @dataclass(frozen=True)

@@ -45,7 +45,7 @@ from kfpga.fixed import QFormat, Rounding
 from kfpga.formats import register_formats
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
 from kfpga.model.reference import KalmanParams, kalman_decomposed, steady_state, steady_state_gain
-from kfpga.spec import FilterSpec, Output, Point, Variant
+from kfpga.spec import Constant, FilterSpec, Output, Point, Variant
 
 __all__ = ["SPEC", "POINTS", "t_exponent", "steady_gain", "predict", "innovation", "correct", "rate", "rate_operand",
            "rate_product", "rate_write",
@@ -187,18 +187,18 @@ def _rate_constants(params):
     shift = t_exponent(params.T)
     out = {"t_shift": shift}
     if shift is None:
-        out["inv_t"] = (1.0 / params.T, "inv_t")
+        out["inv_t"] = Constant(1.0 / params.T, "inv_t")
     return out
 
 
 def _steady_constants(params):
     k1, k2 = steady_gain(params)
-    return {"k1": (k1, "gain"), "k2": (k2, "gain"), **_rate_constants(params)}
+    return {"k1": Constant(k1, "gain"), "k2": Constant(k2, "gain"), **_rate_constants(params)}
 
 
 def _full_constants(params):
     scaled = params.scaled()
-    return {"q": (scaled.Q, "pl"), "r": (params.R, "s"), **_rate_constants(params)}
+    return {"q": Constant(scaled.Q, "pl"), "r": Constant(params.R, "s"), **_rate_constants(params)}
 
 
 def _initial(params):

@@ -59,10 +59,10 @@ def float_ranges(spec, params, variants, stimulus):
             ranges[name] = max(value, ranges.get(name, 0.0))
 
     for variant in variants:
-        run = compile_float_ranges(variant.update, constants=variant.constants(params), state=variant.state,
+        run = compile_float_ranges(variant.update, constants=variant.constants(params), state=variant.state_for(params),
                                    inputs=names)
         initial = variant.initial(params)
-        points = dict(variant.state)
+        points = dict(variant.state_for(params))
         for name, value in initial.items():
             merge({points[name]: abs(value)})
         for r in range(rows[0].shape[0]):

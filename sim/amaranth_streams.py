@@ -15,7 +15,7 @@ from amaranth.sim import Simulator
 
 from kfpga.sim.scoreboard import Scoreboard
 
-__all__ = ["drive", "collect", "run_stream", "run_core", "run_with_deadline", "StreamTimeout"]
+__all__ = ["drive", "collect", "run_stream", "run_core", "run_with_deadline", "measure_timing", "StreamTimeout"]
 
 CLOCK_PERIOD_S = 1e-8
 
@@ -129,3 +129,28 @@ def run_core(config, variant, y, *, seed, channels=1, p_idle=0.0, p_ready=1.0):
     report["got"] = got
     report["overflowed"] = bool(got["overflow"].any())
     return report
+
+
+def measure_timing(dut, config, updates=10):
+    """``(latency, input intervals, output intervals)`` of a core fed one channel with ``valid``
+    and ``ready`` held high: the cycles from the first input handshake to the first output, and
+    the cycles between successive handshakes on each side."""
+    accepted, produced = [], []
+    sim = Simulator(dut)
+    sim.add_clock(CLOCK_PERIOD_S)
+    cycles = (updates + 2) * dut.cycles_per_update + dut.latency + 20
+
+    async def bench(ctx):
+        ctx.set(dut.o.ready, 1)
+        ctx.set(dut.i.valid, 1)
+        ctx.set(getattr(dut.i.payload, config.inputs[0]), 100)
+        for cycle in range(cycles):
+            _, _, ready, valid = await ctx.tick().sample(dut.i.ready, dut.o.valid)
+            if ready:
+                accepted.append(cycle)
+            if valid:
+                produced.append(cycle)
+
+    sim.add_testbench(bench)
+    run_with_deadline(sim, cycles + 100)
+    return produced[0] - accepted[0], np.diff(accepted).tolist(), np.diff(produced).tolist()

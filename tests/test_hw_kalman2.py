@@ -20,7 +20,7 @@ from kfpga.fixed import QFormat
 from kfpga.fixedmodel import FixedModel
 from kfpga.hw.kalman2 import SteadyKalman, make_core
 from kfpga.model.reference import KalmanParams
-from kfpga.sim.amaranth_streams import run_core, run_with_deadline
+from kfpga.sim.amaranth_streams import measure_timing, run_core, run_with_deadline
 from kfpga.sim.sources import stress_codes
 
 CONFIGS = {
@@ -88,6 +88,20 @@ def test_sticky_overflow_flag(variant):
     expected = FixedModel(config, variant=variant).run(y).sticky
     np.testing.assert_array_equal(sticky, expected)
     assert expected[-1] and not expected[0]
+
+
+@pytest.mark.parametrize("name", ["T=0.5 shift", "T=0.3 product"])
+def test_latency_with_the_rate_steps(variant, name):
+    """T not a power of two: x2 = v (1/T) takes more steps (latency), no more cycles per update."""
+    config = CONFIGS[name]
+    dut = make_core(config, variant)
+    latency, _, produced = measure_timing(dut, config)
+    assert latency == dut.latency and produced[:5] == [dut.cycles_per_update] * 5
+    shift = name == "T=0.5 shift"
+    if variant == "steady":
+        assert (dut.cycles_per_update, dut.latency) == ((4, 5) if shift else (4, 8))
+    else:
+        assert dut.cycles_per_update == (25 if shift else 27)
 
 
 def test_core_rejects_bad_channel_count():

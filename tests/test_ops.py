@@ -19,6 +19,7 @@ from kfpga.compiled import compile_stage
 from kfpga.fixed import QFormat
 from kfpga.hw.arith import AmaranthOps
 from kfpga.ops import FloatOps, FractionOps, IntOps, WidthOps
+from kfpga.spec import Constant
 
 SRC = QFormat(20, 6)  # the input of the one-write stages
 
@@ -114,7 +115,7 @@ def mixed(ops, k, x, u):
     return {}, {"s1": s1, "p": p, "c": c, "d": d}
 
 
-CONSTS = {"four": (4.0, QFormat(4, 0)), "third": (1 / 3, QFormat(2, 10, "half_up"))}
+CONSTS = {"four": Constant(4.0, QFormat(4, 0)), "third": Constant(1 / 3, QFormat(2, 10, "half_up"))}
 
 
 def test_backends_agree_on_random_values(seed):

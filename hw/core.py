@@ -1,0 +1,220 @@
+"""What every filter core shares: its interface, its channel states, its output word, and the
+pipelined update loop of the steady-state cores.
+
+A core is an ``amaranth.lib.wiring.Component`` with an input stream of
+:func:`~kfpga.hw.layouts.input_layout` words, an output stream of
+:func:`~kfpga.hw.layouts.output_layout` words (one per input word, in order), a sticky
+``overflow`` flag, and the properties ``latency`` and ``cycles_per_update``. The arithmetic
+between its registers is its filter's stage functions on :class:`~kfpga.hw.arith.AmaranthOps`.
+"""
+
+from __future__ import annotations
+
+from functools import reduce
+from types import MappingProxyType
+from typing import ClassVar
+
+from amaranth import Cat, Const, Module, Signal, signed
+from amaranth.lib import stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from kfpga.ads8364 import CODE_FORMAT
+from kfpga.hw.arith import AmaranthOps
+from kfpga.hw.layouts import input_layout, output_layout
+from kfpga.hw.storage import at, check_channels, select, state_array
+from kfpga.ops import Fx
+
+__all__ = ["Core", "LoopPipeline", "write_estimate"]
+
+
+def write_estimate(m, core, channel, outputs, flags):
+    """Register the estimate word on ``core.o``, with the sample's overflow flags (1-bit values).
+
+    The flags are registered one by one and ORed after the register (see
+    :meth:`Core.flag_outputs`): an OR tree after the saturations would lengthen the last
+    stage's path by its depth.
+    """
+    m.d.sync += [core.o.payload.channel.eq(channel), core.o_flags.eq(Cat(*flags))]
+    m.d.sync += [getattr(core.o.payload, name).eq(value.raw) for name, value in outputs.items()]
+
+
+class Core(wiring.Component):
+    """Config, variant, channel count, constants, reset state and the stream signature."""
+
+    def __init__(self, config, variant, channels):
+        check_channels(channels)
+        config.require_variant(variant)
+        self.config = config
+        self.variant = variant
+        self.channels = channels
+        self.constants = config.constants(variant)
+        self.reset_state = config.reset_state(variant)
+        self.state_points = dict(config.spec.variants[variant].state_for(config.params))
+        super().__init__({
+            "i": In(stream.Signature(input_layout(config, channels))),
+            "o": Out(stream.Signature(output_layout(config, channels))),
+            "overflow": Out(1),
+        })
+
+    def flag_outputs(self, m, count):
+        """``o.payload.overflow`` and the sticky ``overflow`` from ``count`` registered flag bits."""
+        self.o_flags = Signal(count, name="o_flags")
+        sticky = Signal(name="sticky")
+        word = Signal(name="word_overflow")
+        m.d.comb += [word.eq(self.o_flags.any()), self.o.payload.overflow.eq(word),
+                     self.overflow.eq(sticky | (self.o.valid & word))]
+        m.d.sync += sticky.eq(self.overflow)
+
+    def _states(self, names=None):
+        """One register per channel for each state name (default: all of the variant's)."""
+        f = self.config.formats
+        names = list(self.state_points) if names is None else names
+        return {n: state_array(self.channels, signed(f[self.state_points[n]].width), self.reset_state[n], n)
+                for n in names}
+
+    def _state_value(self, regs, name, channel):
+        fmt = self.config.formats[self.state_points[name]]
+        return Fx(select(regs[name], channel).as_signed(), fmt.frac_bits, None, fmt, name)
+
+
+class LoopPipeline(Core):
+    """A steady-state core: the update loop over L register stages, channels interleaved.
+
+    A subclass names its update's steps (:attr:`steps`, each ``step(ops, k, live) -> live``
+    over a dict of values), what each reads (:attr:`reads`), where a pipeline of L stages cuts
+    (:attr:`cuts`), which values are written back (:attr:`writes`), and what follows the loop
+    (:meth:`outputs`, :meth:`output_steps`, and :attr:`carry`: what the outputs read that no
+    later step does). A sample enters an input register, reads its
+    channel's state in the first stage and writes it back at the end of stage L. A sample may
+    follow another of the same channel only once that one has written back (the input stalls
+    until then; nothing is forwarded), so one channel takes a sample every L cycles and C >= L
+    channels in turn one per clock (C-slow operation). All stages stall together when ``o`` is
+    not ready, so nothing is dropped.
+
+    With one channel a state value that a later stage reads is read again from the state
+    register (it cannot change before this sample writes back) instead of being carried in
+    pipeline registers; with several channels the read mux would cost more than it saves.
+    """
+
+    steps: ClassVar[tuple] = ()
+    reads: ClassVar[tuple] = ()
+    carry: ClassVar[tuple] = ()  # values :meth:`outputs` reads that no later step does
+    cuts: ClassVar[dict] = MappingProxyType({})
+    writes: ClassVar[dict] = MappingProxyType({})
+
+    def __init__(self, config, variant, *, channels=1, stages):
+        if not isinstance(stages, int) or isinstance(stages, bool) or stages not in self.cuts:
+            raise ValueError(f"stages must be one of {', '.join(map(str, self.cuts))}, not {stages!r}")
+        super().__init__(config, variant, channels)
+        self.stages = stages
+
+    # what a subclass provides after the loop
+    def outputs(self, live):
+        """``{name: Fx}`` carried past the loop (the output fields and what their steps need)."""
+        raise NotImplementedError
+
+    def output_steps(self):
+        """Steps after the loop, ``step(ops, k, out) -> out``, one register stage between two."""
+        return []
+
+    def final(self, out):
+        """The output fields, ``{field: Fx}``, from what the last step gives."""
+        return out
+
+    @property
+    def output_stages(self):
+        return max(len(self.output_steps()) - 1, 0) if self.output_steps() else 0
+
+    @property
+    def latency(self):
+        """Cycles from the input handshake cycle to the first cycle with ``o.valid`` high."""
+        return 1 + self.stages + self.output_stages
+
+    @property
+    def cycles_per_update(self):
+        """Cycles from accepting one sample to accepting the next of the same channel (``o`` ready)."""
+        return self.stages
+
+    def samples_per_clock(self, channels):
+        """Samples per clock with ``channels`` channels in turn: ``min(1, channels / L)``."""
+        return min(1.0, channels / self.stages)
+
+    def elaborate(self, platform):
+        m = Module()
+        f = self.config.formats
+        regs = self._states()
+        advance = Signal()
+        m.d.comb += advance.eq(~self.o.valid | self.o.ready)
+
+        # the input register
+        s0_valid = Signal()
+        s0 = Signal.like(self.i.payload, name="s0")
+        hazard = Signal()  # a sample of s0's channel has not written back yet
+        take = Signal()  # s0 moves on (or is empty) and takes the next input
+        m.d.comb += [take.eq(advance & (~s0_valid | ~hazard)), self.i.ready.eq(take)]
+        with m.If(take):
+            m.d.sync += [s0_valid.eq(self.i.valid), s0.eq(self.i.payload)]
+
+        live = {name: Fx(getattr(s0, name).as_signed(), 0, None, CODE_FORMAT, name) for name in self.config.inputs}
+        live.update({name: self._state_value(regs, name, s0.channel) for name in regs})
+        valid, channel, flags = s0_valid & ~hazard, s0.channel, Const(0, 1)
+        in_flight = []  # (valid, channel) of the samples before their write-back
+        groups, start = [], 0
+        for cut in (*self.cuts[self.stages], len(self.steps)):
+            groups.append(self.steps[start:cut])
+            start = cut
+        reread = set(regs) if self.channels == 1 else set()
+        last_flags = []
+        for n, group in enumerate(groups, start=1):
+            ops = AmaranthOps(m, f, prefix=f"s{n}_")
+            k = ops.constants(self.constants)
+            if n > 1:
+                needed = set().union(*(self.reads[self.steps.index(s)] for s in group))
+                live.update({name: self._state_value(regs, name, 0) for name in needed & reread})
+            for step in group:
+                live = step(ops, k, live)
+            if n == len(groups):
+                last_flags = [flag for _, flag in ops.flags]
+                break
+            flags = flags | ops.overflow()
+            later = set().union(*self.reads[self.steps.index(group[-1]) + 1:], self.carry) - reread
+            live = {name: value for name, value in live.items() if name in later}
+            valid, channel, flags, live = self._register(m, advance, n, valid, channel, flags, live)
+            in_flight.append((valid, channel))
+        # write-back at the end of the last loop stage
+        with m.If(advance & valid):
+            m.d.sync += [at(regs[name], channel).eq(live[key].raw) for name, key in self.writes.items()]
+        m.d.comb += hazard.eq(reduce(lambda a, b: a | b, [v & (c == s0.channel) for v, c in in_flight], Const(0, 1)))
+
+        # after the loop: the output steps, a register stage between two
+        out = self.outputs(live)
+        pending = [flags, *last_flags]  # flags not yet ORed into one register bit
+        steps = self.output_steps()
+        for n, step in enumerate(steps, start=1):
+            ops = AmaranthOps(m, f, prefix=f"o{n}_")
+            out = step(ops, ops.constants(self.constants), out)
+            pending += [flag for _, flag in ops.flags]
+            if n < len(steps):
+                combined = reduce(lambda a, b: a | b, pending, Const(0, 1))
+                valid, channel, flags, out = self._register(m, advance, f"o{n}", valid, channel, combined, out)
+                pending = [flags]
+        self.flag_outputs(m, len(pending))
+        with m.If(advance):
+            m.d.sync += self.o.valid.eq(valid)
+            with m.If(valid):
+                write_estimate(m, self, channel, self.final(out), pending)
+        return m
+
+    @staticmethod
+    def _register(m, advance, tag, valid, channel, flags, live):
+        """A register stage: every live value, the valid bit, the channel and the flags so far."""
+        r_valid, r_flags = Signal(name=f"r{tag}_valid"), Signal(name=f"r{tag}_flags")
+        r_channel = Signal.like(channel, name=f"r{tag}_channel")
+        held = {}
+        with m.If(advance):
+            m.d.sync += [r_valid.eq(valid), r_channel.eq(channel), r_flags.eq(flags)]
+            for name, value in live.items():
+                reg = Signal(signed(len(value.raw)), name=f"r{tag}_{name}")
+                m.d.sync += reg.eq(value.raw)
+                held[name] = Fx(reg, value.frac, value.const, value.fmt, name)
+        return r_valid, r_channel, r_flags, held

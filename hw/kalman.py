@@ -1,0 +1,305 @@
+"""Cores of the general state-space filter (``model/kalman.py``), from its own stage functions.
+
+* :class:`SteadyCore`: x = F x + K (y - H F x) over four register stages, channels interleaved
+  (:class:`~kfpga.hw.core.LoopPipeline`): predict; observe and innovate; the products K e;
+  correct. Any n = 1..4, m = 1..2; with m = 2 both samples of an update come in one word.
+* :class:`FullCore`: the time-varying filter for one observation on one shared multiplier and one
+  shared restoring divider, a hand-written schedule (below). Two observations are model-only.
+"""
+
+from __future__ import annotations
+
+from types import MappingProxyType
+from typing import ClassVar
+
+from amaranth import Cat, Const, Module, Mux, Signal, signed
+
+from kfpga.ads8364 import CODE_FORMAT
+from kfpga.hw.arith import AmaranthOps
+from kfpga.hw.core import Core, LoopPipeline, write_estimate
+from kfpga.hw.divider import Divider
+from kfpga.hw.storage import at, select
+from kfpga.model import kalman as eq
+from kfpga.ops import Fx, divider_shift, quotient_bits
+
+__all__ = ["SteadyCore", "FullCore", "make_core"]
+
+
+def _states(k, live):
+    return [live[f"x{i + 1}"] for i in range(k["n"])]
+
+
+def _predict(ops, k, live):
+    for i, v in enumerate(eq.predict(ops, k, _states(k, live))):               # xl = F x
+        live[f"xl{i + 1}"] = v
+    return live
+
+
+def _observe(ops, k, live):
+    xl = [live[f"xl{i + 1}"] for i in range(k["n"])]
+    yh = eq.observe(ops, k, xl)                                                 # yh = H xl
+    e = eq.innovations(ops, k, {name: live[name] for name in k["observations"]}, yh)  # e = y - yh
+    live.update({f"yh{j + 1}": yh[j] for j in range(k["m"])})
+    live.update({f"e{j + 1}": e[j] for j in range(k["m"])})
+    return live
+
+
+def _products(ops, k, live):
+    e = [live[f"e{j + 1}"] for j in range(k["m"])]
+    for i, row in enumerate(eq.gain_products(ops, k, e)):                       # K e
+        for j, v in enumerate(row):
+            live[f"ke{i}{j}"] = v
+    return live
+
+
+def _correct(ops, k, live):
+    xl = [live[f"xl{i + 1}"] for i in range(k["n"])]
+    products = [[live[f"ke{i}{j}"] for j in range(k["m"])] for i in range(k["n"])]
+    for i, v in enumerate(eq.correct(ops, k, xl, products)):                   # x = xl + K e
+        live[f"x{i + 1}_next"] = v
+    return live
+
+
+_ALL = range(1, 5)
+_OBS = range(1, 3)
+
+
+class SteadyCore(LoopPipeline):
+    """The steady-state filter of any model: x = xl + K e, xl = F x, e = y - H xl.
+
+    Four steps, one register stage each by default (``stages`` 1..4, :data:`CUTS`): xl = F x;
+    yh = H xl and e = y - yh; the products K e; x = xl + K e. One channel takes a sample every
+    L cycles, C >= L channels in turn one per clock. Parameters and members as
+    :class:`~kfpga.hw.kalman2.SteadyKalman`; the input word has one field per observation.
+    """
+
+    steps = (_predict, _observe, _products, _correct)
+    reads = ({f"x{i}" for i in _ALL}, {f"xl{i}" for i in _ALL} | {"y", "y1", "y2"}, {f"e{j}" for j in _OBS},
+             {f"xl{i}" for i in _ALL} | {f"ke{i}{j}" for i in range(4) for j in range(2)})
+    cuts: ClassVar[dict] = MappingProxyType({1: (), 2: (2,), 3: (1, 3), 4: (1, 2, 3)})
+    carry = ("yh1", "yh2")
+
+    def __init__(self, config, *, channels=1, stages=4):
+        n = config.params.n
+        self.writes = {f"x{i + 1}": f"x{i + 1}_next" for i in range(n)}
+        # the observations' names are the model's own: the step after predict reads them
+        names = set(config.inputs)
+        self.reads = (self.reads[0], self.reads[1] | names, self.reads[2], self.reads[3])
+        super().__init__(config, "steady", channels=channels, stages=stages)
+
+    def outputs(self, live):
+        k = self.constants
+        out = {f"x{i + 1}": live[f"x{i + 1}_next"] for i in range(k["n"])}
+        out.update({f"yhat{j + 1}": live[f"yh{j + 1}"] for j in range(k["m"])})
+        return out
+
+
+class FullCore(Core):
+    """The time-varying filter for one observation on one multiplier and one divider.
+
+    Schedule per update (one channel at a time), at most one carry chain or one multiplier
+    between two registers::
+
+        IDLE   accept a sample; load the channel's state
+        T1     F x and F P, exact sums (products by F are shifts)
+        T2     xl = [F x]_xl; (F P) F^T + G Q G^T, exact
+        T3     Pl = [...]_pl; yh = [H xl]_yh; e = [y - yh]_e
+        T4     S = [H Pl H^T + R]_s; the dividends |H Pl|_i, shifted
+        DIV    n divisions K_i = (H Pl)_i / S, one after the other on one divider
+               (quotient_bits + 2 cycles each)
+        MUL    the n + n(n+1)/2 products K_i e and K_i (H Pl)_j, one per cycle on one multiplier
+        WB     x = [xl + K e]_x, P = [Pl - K H Pl]_p, written back; flags registered
+        OUT    the estimate out
+
+    :attr:`cycles_per_update` is ``5 + n (quotient_bits + 2) + n + n(n+1)/2 + 2``. Parameters and
+    members as :class:`SteadyCore` (no ``stages``).
+    """
+
+    def __init__(self, config, *, channels=1):
+        if config.params.m != 1:
+            raise ValueError(f"the time-varying core takes one observation; this model has {config.params.m} "
+                             "(two observations are model-only: use the steady variant for hardware)")
+        super().__init__(config, "full", channels)
+        f, n = config.formats, config.params.n
+        self.n = n
+        self.h_index = [j for j, v in enumerate(config.params.H[0]) if v != 0]
+        self.qbits = [quotient_bits(f[f"k{i + 1}"]) for i in range(n)]
+        self.products = [("e", i, 0) for i in range(n)] + [("p", i, j, 0) for i in range(n) for j in range(i, n)]
+
+    @property
+    def divide_cycles(self):
+        return max(self.qbits) + 2  # a start cycle, then quotient_bits + 1 cycles of the divider
+
+    @property
+    def cycles_per_update(self):
+        """Cycles from accepting one sample to being able to accept the next (``o`` always ready)."""
+        return 1 + 4 + self.n * self.divide_cycles + len(self.products) + 1 + 1
+
+    @property
+    def latency(self):
+        """Cycles from the input handshake cycle to the first cycle with ``o.valid`` high."""
+        return self.cycles_per_update
+
+    def elaborate(self, platform):
+        m = Module()
+        f, n = self.config.formats, self.n
+        regs = self._states()
+        names = list(regs)
+        channel = Signal.like(self.i.payload.channel)
+        obs = self.config.inputs[0]
+        sample = Signal(signed(CODE_FORMAT.width))
+        work = {nm: Signal(signed(f[self.state_points[nm]].width), name=f"{nm}_w") for nm in names}
+        flags = Signal()  # OR of the overflow flags of this update so far
+
+        def fx(signal, point):
+            return Fx(signal.as_signed(), f[point].frac_bits, None, f[point], point)
+
+        x = [fx(work[f"x{i + 1}"], f"x{i + 1}") for i in range(n)]
+
+        def p_read(i, j):
+            name = f"p{min(i, j) + 1}{max(i, j) + 1}"
+            return fx(work[name], name)
+
+        # -- T1: exact F x and F P -------------------------------------------------------------
+        t1 = AmaranthOps(m, f, prefix="t1_")
+        k = t1.constants(self.constants)
+        xl_sum = [t1.hold(v, f"xlsum{i}") for i, v in enumerate(eq.predict_sums(t1, k, x))]
+        fp = [[t1.hold(v, f"fp{i}{j}") for j, v in enumerate(row)] for i, row in enumerate(eq.covariance_fp(t1, k, p_read))]
+        # -- T2: xl, and (F P) F^T + G Q G^T exact --------------------------------------------------
+        t2 = AmaranthOps(m, f, prefix="t2_")
+        xl = [t2.hold(t2.rq(v, f"xl{i + 1}"), f"xl{i}") for i, (v, _) in enumerate(xl_sum)]
+        pl_sum = {ij: t2.hold(v, f"plsum{ij[0]}{ij[1]}")
+                  for ij, v in eq.covariance_sums(t2, k, [[h for h, _ in row] for row in fp]).items()}
+        # -- T3: Pl, yh, e ---------------------------------------------------------------------------
+        t3 = AmaranthOps(m, f, prefix="t3_")
+        pl = {ij: t3.hold(t3.rq(v, f"pl{ij[0] + 1}{ij[1] + 1}"), f"pl{ij[0]}{ij[1]}") for ij, (v, _) in pl_sum.items()}
+        xl_r = [h for h, _ in xl]
+        yh = eq.observe(t3, k, xl_r)
+        e = eq.innovations(t3, k, {obs: t3.input(sample, CODE_FORMAT, obs)}, yh)
+        yh_r, yh_assign = t3.hold(yh[0], "yh")
+        e_r, e_assign = t3.hold(e[0], "e")
+        # -- T4: S and the dividends -------------------------------------------------------------------
+        t4 = AmaranthOps(m, f, prefix="t4_")
+        pl_r = {ij: h for ij, (h, _) in pl.items()}
+        hp = eq.observed_rows(t4, k, pl_r)
+        s = eq.innovation_variance(t4, k, hp)
+        shifts = [divider_shift(hp[0][i].frac, s.frac, f[f"k{i + 1}"].frac_bits) for i in range(n)]
+        widths = [len(hp[0][i].raw) + shifts[i] for i in range(n)]
+        div = Divider(dividend_bits=max(widths), divisor_bits=f["s"].width, quotient_bits=max(self.qbits))
+        m.submodules.div = div
+        nums = [Signal(max(widths), name=f"num{i}") for i in range(n)]
+        den = Signal(f["s"].width, name="den")
+
+        def magnitude(v, shift):
+            return Mux(v < 0, -v, v).as_unsigned().shift_left(shift)
+
+        # -- DIV: one gain after another ---------------------------------------------------------------
+        index = Signal(range(max(n, len(self.products)) + 1), name="index")
+        gains = [Signal(signed(f[f"k{i + 1}"].width), name=f"K{i}") for i in range(n)]
+        q = div.o.payload.quotient
+        limit = Signal(max(self.qbits) + 1, name="limit")
+        # operands chosen by mux trees, not case blocks (see storage.select)
+        m.d.comb += limit.eq(select([Const((1 << b) - 1, len(limit)) for b in self.qbits], index))
+        sel_num = Signal(max(widths))
+        m.d.comb += [sel_num.eq(select(nums, index)), div.i.payload.dividend.eq(sel_num),
+                     div.i.payload.divisor.eq(den), div.o.ready.eq(1)]
+        hp_sign = Signal(n)
+        saturate = (div.o.payload.overflow | (q > limit))
+        quotient = Mux(saturate, limit, q)
+
+        # -- MUL: one product per cycle on one multiplier -------------------------------------------------
+        operands_a = [Fx(g, f[f"k{i + 1}"].frac_bits) for i, g in enumerate(gains)]
+        hp_r = [Signal(signed(len(hp[0][j].raw)), name=f"hp{j}") for j in range(n)]
+        hp_fx = [Fx(hp_r[j], hp[0][j].frac) for j in range(n)]
+        pairs = [(operands_a[p[1]], e_r if p[0] == "e" else hp_fx[p[2]]) for p in self.products]
+        width_a = max(len(a.raw) for a, _ in pairs)
+        width_b = max(len(b.raw) for _, b in pairs)
+        sel_a, sel_b = Signal(signed(width_a)), Signal(signed(width_b))
+        m.d.comb += [sel_a.eq(select([a.raw.as_signed() for a, _ in pairs], index)),
+                     sel_b.eq(select([b.raw.as_signed() for _, b in pairs], index))]
+        product = Signal(signed(width_a + width_b), name="product")
+        m.d.comb += product.eq(sel_a * sel_b)
+        prod_regs = [Signal(signed(len(a.raw) + len(b.raw)), name=f"prod{idx}") for idx, (a, b) in enumerate(pairs)]
+        products = {p: Fx(prod_regs[idx], pairs[idx][0].frac + pairs[idx][1].frac) for idx, p in enumerate(self.products)}
+
+        # -- WB: the corrections from the registered products ------------------------------------------------
+        wb = AmaranthOps(m, f, prefix="wb_")
+        state = eq.update_corrections(wb, k, xl_r, pl_r, products)
+        wb_bits = Signal(len(wb.flags), name="wb_flags")
+        done = {nm: Signal(signed(f[self.state_points[nm]].width), name=f"{nm}_done") for nm in (f"x{i + 1}" for i in range(n))}
+
+        self.flag_outputs(m, 2)
+        with m.If(self.o.valid & self.o.ready):
+            m.d.sync += self.o.valid.eq(0)
+
+        with m.FSM(name="schedule") as fsm:
+            with m.State("IDLE"):
+                with m.If(self.i.valid):
+                    m.d.sync += [channel.eq(self.i.payload.channel), sample.eq(getattr(self.i.payload, obs))]
+                    m.d.sync += [work[nm].eq(select(regs[nm], self.i.payload.channel)) for nm in names]
+                    m.next = "T1"
+            with m.State("T1"):
+                m.d.sync += [a for _, a in xl_sum] + [a for row in fp for _, a in row]
+                m.d.sync += flags.eq(t1.overflow())
+                m.next = "T2"
+            with m.State("T2"):
+                m.d.sync += [a for _, a in xl] + [a for _, a in pl_sum.values()]
+                m.d.sync += flags.eq(flags | t2.overflow())
+                m.next = "T3"
+            with m.State("T3"):
+                m.d.sync += [a for _, a in pl.values()] + [yh_assign, e_assign]
+                m.d.sync += flags.eq(flags | t3.overflow())
+                m.next = "T4"
+            with m.State("T4"):
+                m.d.sync += [nums[i].eq(magnitude(hp[0][i].raw, shifts[i])) for i in range(n)]
+                m.d.sync += [hp_r[j].eq(hp[0][j].raw) for j in range(n)]
+                m.d.sync += [hp_sign.eq(Cat(*(hp[0][i].raw < 0 for i in range(n)))), index.eq(0)]
+                m.d.sync += [den.eq(Mux(s.raw > 0, s.raw.as_unsigned(), 0)), flags.eq(flags | t4.overflow())]
+                m.next = "GO"  # S <= 0 becomes a zero divisor (the quotient saturates)
+            with m.State("GO"):
+                m.next = "DIV"
+            with m.State("DIV"):
+                with m.If(div.o.valid):
+                    with m.Switch(index):
+                        for i in range(n):
+                            with m.Case(i):
+                                m.d.sync += gains[i].eq(Mux(hp_sign[i], -quotient, quotient))
+                    m.d.sync += [flags.eq(flags | saturate), index.eq(index + 1)]
+                    with m.If(index == n - 1):
+                        m.d.sync += index.eq(0)
+                        m.next = "MUL"
+                    with m.Else():
+                        m.next = "GO"
+            with m.State("MUL"):
+                with m.Switch(index):
+                    for idx, reg in enumerate(prod_regs):
+                        with m.Case(idx):
+                            m.d.sync += reg.eq(product)
+                m.d.sync += index.eq(index + 1)
+                with m.If(index == len(self.products) - 1):
+                    m.next = "WB"
+            with m.State("WB"):
+                m.d.sync += [at(regs[nm], channel).eq(state[nm].raw) for nm in names]
+                m.d.sync += [done[nm].eq(state[nm].raw) for nm in done]
+                m.d.sync += wb_bits.eq(Cat(*(flag for _, flag in wb.flags)))
+                m.next = "OUT"
+            with m.State("OUT"):
+                with m.If(~self.o.valid | self.o.ready):
+                    m.d.sync += self.o.valid.eq(1)
+                    outputs = {nm: Fx(done[nm], 0) for nm in done}
+                    outputs["yhat1"] = yh_r
+                    write_estimate(m, self, channel, outputs, [flags, wb_bits.any()])
+                    m.next = "IDLE"
+        # plain assignments (Verilog `assign`), not case-statement outputs: no simulator can
+        # leave them undefined at time zero while the state has not changed yet
+        m.d.comb += [self.i.ready.eq(fsm.ongoing("IDLE")), div.i.valid.eq(fsm.ongoing("GO"))]
+        return m
+
+
+def make_core(config, variant, *, channels=1):
+    """The core of ``variant`` ("steady" or "full")."""
+    if variant == "steady":
+        return SteadyCore(config, channels=channels)
+    if variant == "full":
+        return FullCore(config, channels=channels)
+    raise ValueError(f"variant must be 'steady' or 'full', not {variant!r}")

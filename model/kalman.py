@@ -1,0 +1,748 @@
+"""Any linear state-space model: an n-state Kalman filter from F, G, Q, H, R (SPEC §1, §4, §8).
+
+Model, with n = 1..4 states and m = 1..2 observations (each a 16-bit ADC code)::
+
+    x_k = F x_{k-1} + G w_k,   w ~ N(0, Q)        y_k = H x_k + v_k,   v ~ N(0, R)
+
+Steady state (``steady``): the gain K of the discrete Riccati equation (or one given)::
+
+    xl = [F x]_xl          yh = [H xl]_yh        e = [y - yh]_e
+    x  = [xl + K e]_x      outputs: x1..xn (filtered), yhat1..yhatm (= yh, one-step predictions)
+
+Time-varying (``full``), m = 1 (P symmetric, n(n+1)/2 entries kept)::
+
+    xl  = [F x]_xl                         Pl = [F P F^T + G Q G^T]_pl
+    hp  = H Pl   (exact: a row of Pl when H selects one state)
+    S   = [hp H^T + R]_s                   K_i = div(hp_i, S)        (the restoring divider)
+    e   = [y - H xl]_e                     x = [xl + K e]_x
+    P   = [Pl - K hp]_p                    (P_ij = Pl_ij - K_i hp_j, i <= j)
+
+For m = 2 the time-varying variant is model-only (float and bit-accurate; no core): S is 2x2
+and K = Pl H^T S^-1 with the inverse through the determinant: ``det = [s11 s22 - s12^2]_det``,
+``K_i1 = div([hp1_i s22 - hp2_i s12]_kn, det)``, ``K_i2 = div([hp2_i s11 - hp1_i s12]_kn, det)``.
+
+Every index runs over what the model has; a product by a matrix entry that is 0 or +-2**k
+costs nothing (a shift; F = [[1, T], [0, 1]] with T = 2**k has only such entries). Any other
+entry of F is a constant multiplier whose operand is the state rounded into an 18-bit operand
+``xo<j>``. H must select states (entries 0 or +-2**k), as sensors do; the time-varying variant
+needs F's entries to be 0 or +-2**k as well.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from kfpga.errors import ConfigError
+from kfpga.formats import register_formats
+from kfpga.model.ranges import float_ranges, full_scale_stimulus
+from kfpga.params import matrix, number
+from kfpga.spec import Constant, FilterSpec, Output, Point, Variant
+
+__all__ = ["StateSpaceParams", "SPEC", "PRESETS", "dare_gain", "reference", "steady_update", "full_update", "free",
+           "PBHError", "predict_sums", "predict", "observe", "innovations", "gain_products", "correct", "covariance_fp",
+           "covariance_sums", "covariance_predict", "observed_rows", "innovation_variance", "gains_one", "gains_two",
+           "update_products", "update_corrections"]
+
+MAX_STATES, MAX_OBS = 4, 2
+
+
+def _square(name, value):
+    try:
+        rows = [list(r) for r in value]
+    except TypeError:
+        raise TypeError(f"{name} must be a matrix (a list of rows), not {value!r}") from None
+    return len(rows), (len(rows[0]) if rows else 0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class StateSpaceParams:
+    """A linear state-space model (defaults: the paper's 2-state constant-velocity model).
+
+    Parameters
+    ----------
+    F:
+        n x n state transition (n = 1..4).
+    G:
+        n x p process-noise input; the process noise is ``G Q G^T``.
+    Q:
+        p x p process-noise covariance, symmetric positive semi-definite.
+    H:
+        m x n observation matrix (m = 1..2); its entries must be 0 or +-2**k (it selects states).
+    R:
+        m x m observation-noise covariance, symmetric positive definite.
+    P0:
+        n x n initial covariance, symmetric positive definite.
+    x0:
+        The n initial states.
+    T:
+        The sampling period in seconds (> 0): the time scale of the scenarios; the matrices
+        already contain it.
+    observations:
+        Names of the observations (CSV columns, stream fields); default ``y`` for one, ``y1``,
+        ``y2`` for two.
+    gain:
+        n x m: a fixed gain instead of the Riccati equation's (an alpha-beta filter), for the
+        steady-state variant.
+    """
+
+    F: tuple = ((1.0, 1.0), (0.0, 1.0))
+    G: tuple = ((0.0,), (1.0,))
+    Q: tuple = ((2.0,),)
+    H: tuple = ((1.0, 0.0),)
+    R: tuple = ((4.0,),)
+    P0: tuple = ((10.0, 0.0), (0.0, 10.0))
+    x0: tuple = (0.0, 0.0)
+    T: float = 1.0
+    observations: tuple = ()
+    gain: tuple | None = None
+
+    def __post_init__(self):
+        s = object.__setattr__
+        n, cols = _square("F", self.F)
+        if not 1 <= n <= MAX_STATES or cols != n:
+            raise ValueError(f"F must be n x n with n = 1..{MAX_STATES} states, not {n} x {cols}")
+        s(self, "F", matrix("F", self.F, n, n))
+        m, hcols = _square("H", self.H)
+        if not 1 <= m <= MAX_OBS or hcols != n:
+            raise ValueError(f"H must be m x {n} (m = 1..{MAX_OBS} observations of the {n} states), not {m} x {hcols}")
+        s(self, "H", matrix("H", self.H, m, n))
+        for i, row in enumerate(self.H):
+            for j, h in enumerate(row):
+                if not free(h):
+                    raise ValueError(f"H[{i}][{j}] = {h!r}: H must select states (entries 0 or +-2**k)")
+        rows, p = _square("G", self.G)
+        if rows != n or not 1 <= p <= MAX_STATES:
+            raise ValueError(f"G must be {n} x p (p = 1..{MAX_STATES} noise inputs), not {rows} x {p}")
+        s(self, "G", matrix("G", self.G, n, p))
+        s(self, "Q", matrix("Q", self.Q, p, p, symmetric=True))
+        q_eig = np.linalg.eigvalsh(np.array(self.Q))
+        if np.min(q_eig) < -1e-12 * max(1.0, np.max(np.abs(q_eig))):
+            raise ValueError(f"Q must be positive semi-definite, not {self.Q!r} "
+                             f"(eigenvalues {', '.join(f'{e:.4g}' for e in q_eig)})")
+        s(self, "R", matrix("R", self.R, m, m, symmetric=True, positive_definite=True))
+        s(self, "P0", matrix("P0", self.P0, n, n, symmetric=True, positive_definite=True))
+        try:
+            x0 = list(self.x0)
+        except TypeError:
+            raise TypeError(f"x0 must be a list of {n} numbers, not {self.x0!r}") from None
+        if len(x0) != n:
+            raise ValueError(f"x0 must have {n} entries (one per state), not {len(x0)}: {self.x0!r}")
+        s(self, "x0", tuple(number(f"x0[{i}]", v) for i, v in enumerate(x0)))
+        s(self, "T", number("T", self.T, minimum=0.0, strict=True))
+        names = tuple(self.observations) or (("y",) if m == 1 else tuple(f"y{j + 1}" for j in range(m)))
+        if len(names) != m or not all(isinstance(v, str) and v.isidentifier() for v in names) or len(set(names)) != m:
+            raise ValueError(f"observations must be {m} different names (letters, digits, _), not {self.observations!r}")
+        if {"channel", "overflow"} & set(names) or any(v.startswith(("x", "yhat")) and v[1:].isdigit() for v in names):
+            raise ValueError(f"observations must not be named like an output or a stream field, not {names!r}")
+        s(self, "observations", names)
+        if self.gain is not None:
+            s(self, "gain", matrix("gain", self.gain, n, m))
+
+    @property
+    def n(self):
+        return len(self.F)
+
+    @property
+    def m(self):
+        return len(self.H)
+
+    def arrays(self):
+        """``(F, G Q G^T, H, R)`` as float arrays."""
+        f, g, q = np.array(self.F), np.array(self.G), np.array(self.Q)
+        return f, g @ q @ g.T, np.array(self.H), np.array(self.R)
+
+
+def free(value):
+    """Whether a constant factor costs no multiplier: 0 or +-2**k."""
+    if value == 0:
+        return True
+    mantissa, _ = math.frexp(abs(value))
+    return mantissa == 0.5
+
+
+def exact_format(value):
+    """A format holding 0 or +-2**k exactly, with as few fraction bits as it needs."""
+    from kfpga.fixed import QFormat
+
+    if value == 0:
+        return QFormat(2, 0)
+    k = math.frexp(abs(value))[1] - 1
+    return QFormat(max(2, k + 2), max(0, -k))
+
+
+# -- the Riccati equation ----------------------------------------------------------------------
+
+
+class PBHError(ValueError):
+    """The steady-state gain does not exist: a mode is not detectable or not stabilisable."""
+
+
+def _check_pbh(params):
+    f, gqg, h, _ = params.arrays()
+    n = params.n
+    w, v = np.linalg.eigh(gqg)
+    root = v @ np.diag(np.sqrt(np.clip(w, 0, None)))  # G Q^1/2 (up to an orthogonal factor)
+    for lam in np.linalg.eigvals(f):
+        if abs(lam) < 1 - 1e-9:
+            continue
+        a = lam * np.eye(n) - f
+        if np.linalg.matrix_rank(np.vstack([a, h]), tol=1e-9) < n:
+            raise PBHError(f"(F, H) is not detectable: F's mode of eigenvalue {lam:.4g} is not stable and H does not "
+                           "see it, so the steady-state gain does not exist (observe that state, or use the full variant)")
+        if np.linalg.matrix_rank(np.hstack([a, root]), tol=1e-9) < n:
+            raise PBHError(f"(F, G Q^1/2) is not stabilisable: F's mode of eigenvalue {lam:.4g} is not stable and no "
+                           "process noise reaches it, so the Riccati equation has no stabilising solution (add noise "
+                           "to that state, or use the full variant)")
+
+
+def dare_gain(params):
+    """The steady-state gain K (n x m) and predicted covariance of the discrete Riccati equation.
+
+    Solves ``P = F P F^T - F P H^T (H P H^T + R)^-1 H P F^T + G Q G^T`` by the structure-preserving
+    doubling algorithm (quadratic convergence even with poles near 1); ``K = P H^T (H P H^T + R)^-1``.
+    Raises :class:`PBHError` when no stabilising solution exists.
+    """
+    _check_pbh(params)
+    f, gqg, h, r = params.arrays()
+    n = params.n
+    a = f.T.copy()
+    g = h.T @ np.linalg.inv(r) @ h
+    q = gqg.copy()
+    eye = np.eye(n)
+    for _ in range(200):
+        w = np.linalg.inv(eye + g @ q)
+        a_next = a @ w @ a
+        g_next = g + a @ w @ g @ a.T
+        q_next = q + a.T @ q @ w @ a
+        done = np.max(np.abs(q_next - q)) <= 1e-15 * max(np.max(np.abs(q_next)), 1e-300)
+        a, g, q = a_next, g_next, q_next
+        if done:
+            break
+    else:  # pragma: no cover - converges in a few dozen steps once PBH holds
+        raise ArithmeticError("Riccati doubling did not converge")
+    p = (q + q.T) / 2
+    k = p @ h.T @ np.linalg.inv(h @ p @ h.T + r)
+    return k, p
+
+
+def steady_gain(params):
+    """The gain of the steady-state variant: ``params.gain`` when given, else the DARE's."""
+    return np.array(params.gain) if params.gain is not None else dare_gain(params)[0]
+
+
+# -- the float reference -----------------------------------------------------------------------
+
+
+def reference(params, variant, y):
+    """The float filter, matrix form: ``{x1..xn, yhat1..yhatm: array}`` for inputs ``y``.
+
+    ``y`` is an array (one observation) or ``{observation: array}``.
+    """
+    f, gqg, h, r = params.arrays()
+    names = params.observations
+    ys = np.stack([np.asarray(y[nm] if isinstance(y, dict) else y, dtype=np.float64) for nm in names], axis=-1)
+    steps = ys.shape[0]
+    x = np.array(params.x0, dtype=np.float64)
+    p = np.array(params.P0, dtype=np.float64)
+    k_inf = steady_gain(params) if variant == "steady" else None
+    xs, yh = np.empty((steps, params.n)), np.empty((steps, params.m))
+    for t in range(steps):
+        x = f @ x                                              # x = F x
+        yh[t] = h @ x                                          # yhat = H x
+        if variant == "steady":
+            gain = k_inf
+        else:
+            p = f @ p @ f.T + gqg                              # P = F P F^T + G Q G^T
+            gain = p @ h.T @ np.linalg.inv(h @ p @ h.T + r)    # K = P H^T (H P H^T + R)^-1
+            p = (np.eye(params.n) - gain @ h) @ p              # P = (I - K H) P
+        x = x + gain @ (ys[t] - yh[t])                         # x = x + K (y - H x)
+        xs[t] = x
+    out = {f"x{i + 1}": xs[:, i] for i in range(params.n)}
+    out.update({f"yhat{j + 1}": yh[:, j] for j in range(params.m)})
+    return out
+
+
+# -- the equations, once ---------------------------------------------------------------------------
+
+
+def _term(ops, k, name, x, operand, cache):
+    """``c * x`` for the matrix entry ``k[name]`` (``None``: the entry is 0, no term)."""
+    c = k.get(name)
+    if c is None:
+        return None
+    if k["free"][name]:
+        return ops.mul(c, x)
+    if operand not in cache:
+        cache[operand] = ops.rq(x, operand)                    # the 18-bit operand of the product
+    return ops.mul(c, cache[operand])
+
+
+def _sum(ops, k, terms):
+    """The exact sum of the terms that exist (a constant 0 when none does)."""
+    terms = [t for t in terms if t is not None]
+    if not terms:
+        return k["zero"]
+    out = terms[0]
+    for t in terms[1:]:
+        out = ops.add(out, t)
+    return out
+
+
+def predict_sums(ops, k, x):
+    """F x, one exact sum per state."""
+    n, cache = k["n"], {}
+    return [_sum(ops, k, [_term(ops, k, f"F{i}{j}", x[j], f"xo{j + 1}", cache) for j in range(n)]) for i in range(n)]
+
+
+def predict(ops, k, x):
+    """xl = [F x]_xl, one row per state."""
+    return [ops.rq(v, f"xl{i + 1}") for i, v in enumerate(predict_sums(ops, k, x))]
+
+
+def observe(ops, k, xl):
+    """yh = H xl, one row per observation."""
+    return [ops.rq(_sum(ops, k, [_term(ops, k, f"H{j}{i}", xl[i], None, {}) for i in range(k["n"])]), f"yh{j + 1}")
+            for j in range(k["m"])]
+
+
+def innovations(ops, k, u, yh):
+    """e = y - yh."""
+    return [ops.rq(ops.sub(u[name], yh[j]), f"e{j + 1}") for j, name in enumerate(k["observations"])]
+
+
+def correct(ops, k, xl, products):
+    """x = xl + K e (``products[i]``: the terms K_ij e_j of state i)."""
+    return [ops.rq(_sum(ops, k, [xl[i], *products[i]]), f"x{i + 1}") for i in range(k["n"])]
+
+
+def gain_products(ops, k, e):
+    """K_ij e_j of the steady-state variant (K constant)."""
+    return [[ops.mul(k[f"K{i}{j}"], e[j]) for j in range(k["m"])] for i in range(k["n"])]
+
+
+def _outputs(k, x, yh):
+    out = {f"x{i + 1}": x[i] for i in range(k["n"])}
+    out.update({f"yhat{j + 1}": yh[j] for j in range(k["m"])})
+    return out
+
+
+def steady_update(ops, k, x, u):
+    """One steady-state update: ``(next state, outputs)``."""
+    xs = [x[f"x{i + 1}"] for i in range(k["n"])]
+    xl = predict(ops, k, xs)                                          # xl = F x
+    yh = observe(ops, k, xl)                                          # yh = H xl
+    e = innovations(ops, k, u, yh)                                    # e = y - yh
+    xn = correct(ops, k, xl, gain_products(ops, k, e))                # x = xl + K e
+    return {f"x{i + 1}": xn[i] for i in range(k["n"])}, _outputs(k, xn, yh)
+
+
+def _pname(i, j):
+    return f"{min(i, j) + 1}{max(i, j) + 1}"
+
+
+def covariance_fp(ops, k, p):
+    """F P, exact (``p(i, j)`` reads P)."""
+    n = k["n"]
+    return [[_sum(ops, k, [_term(ops, k, f"F{i}{c}", p(c, j), None, {}) for c in range(n)]) for j in range(n)]
+            for i in range(n)]
+
+
+def covariance_sums(ops, k, fp):
+    """(F P) F^T + G Q G^T, exact, the upper triangle."""
+    n = k["n"]
+    return {(i, j): _sum(ops, k, [_term(ops, k, f"F{j}{c}", fp[i][c], None, {}) for c in range(n)]
+                         + [k.get(f"GQG{i}{j}")]) for i in range(n) for j in range(i, n)}
+
+
+def covariance_predict(ops, k, p):
+    """Pl = [F P F^T + G Q G^T]_pl, the upper triangle; ``p(i, j)`` reads P."""
+    return {ij: ops.rq(v, f"pl{ij[0] + 1}{ij[1] + 1}") for ij, v in covariance_sums(ops, k, covariance_fp(ops, k, p)).items()}
+
+
+def observed_rows(ops, k, pl):
+    """hp = H Pl (rows of Pl when H selects states): ``hp[j][i]``, exact."""
+    n = k["n"]
+    return [[_sum(ops, k, [_term(ops, k, f"H{j}{c}", pl[(min(c, i), max(c, i))], None, {}) for c in range(n)])
+             for i in range(n)] for j in range(k["m"])]
+
+
+def innovation_variance(ops, k, hp):
+    """S = [H Pl H^T + R]_s (one observation)."""
+    return ops.rq(_sum(ops, k, [_term(ops, k, f"H0{i}", hp[0][i], None, {}) for i in range(k["n"])] + [k["R00"]]), "s")
+
+
+def gains_one(ops, k, hp, s):
+    """K_i = div(hp_i, S): K = Pl H^T / S for one observation."""
+    return [[ops.div(hp[0][i], s, f"k{i + 1}", f"K{i}0")] for i in range(k["n"])]
+
+
+def gains_two(ops, k, hp):
+    """K = Pl H^T S^-1 for two observations, the inverse through the determinant."""
+    n = k["n"]
+    s = {(a, b): ops.rq(_sum(ops, k, [_term(ops, k, f"H{b}{i}", hp[a][i], None, {}) for i in range(n)]
+                             + [k.get(f"R{a}{b}")]), f"s{a + 1}{b + 1}") for a in range(2) for b in range(a, 2)}
+    det = ops.rq(ops.sub(ops.mul(s[(0, 0)], s[(1, 1)]), ops.mul(s[(0, 1)], s[(0, 1)])), "det")  # det S
+    gains = []
+    for i in range(n):
+        n1 = ops.rq(ops.sub(ops.mul(hp[0][i], s[(1, 1)]), ops.mul(hp[1][i], s[(0, 1)])), "kn", f"kn{i}0")
+        n2 = ops.rq(ops.sub(ops.mul(hp[1][i], s[(0, 0)]), ops.mul(hp[0][i], s[(0, 1)])), "kn", f"kn{i}1")
+        gains.append([ops.div(n1, det, f"k{i + 1}", f"K{i}0"), ops.div(n2, det, f"k{i + 1}", f"K{i}1")])
+    return gains
+
+
+def update_products(ops, k, gains, e, hp):
+    """The products of the measurement update: ``("e", i, j)``: K_ij e_j; ``("p", i, j, a)``:
+    K_ia hp_aj for the upper triangle of P."""
+    n, m = k["n"], k["m"]
+    out = {("e", i, j): ops.mul(gains[i][j], e[j]) for i in range(n) for j in range(m)}
+    out.update({("p", i, j, a): ops.mul(gains[i][a], hp[a][j]) for i in range(n) for j in range(i, n) for a in range(m)})
+    return out
+
+
+def update_corrections(ops, k, xl, pl, products):
+    """x = [xl + K e]_x and P = [Pl - K H Pl]_p from the products: the next state."""
+    n, m = k["n"], k["m"]
+    xn = correct(ops, k, xl, [[products[("e", i, j)] for j in range(m)] for i in range(n)])
+    state = {f"x{i + 1}": xn[i] for i in range(n)}
+    for i in range(n):
+        for j in range(i, n):
+            kh = _sum(ops, k, [products[("p", i, j, a)] for a in range(m)])
+            state[f"p{i + 1}{j + 1}"] = ops.rq(ops.sub(pl[(i, j)], kh), f"p{i + 1}{j + 1}")
+    return state
+
+
+def full_update(ops, k, x, u):
+    """One time-varying update, m = 1 or 2: ``(next state, outputs)``."""
+    n = k["n"]
+    xl = predict(ops, k, [x[f"x{i + 1}"] for i in range(n)])           # xl = F x
+    pl = covariance_predict(ops, k, lambda i, j: x[f"p{_pname(i, j)}"])  # Pl = F P F^T + G Q G^T
+    hp = observed_rows(ops, k, pl)                                    # H Pl
+    yh = observe(ops, k, xl)                                          # yh = H xl
+    e = innovations(ops, k, u, yh)                                    # e = y - yh
+    if k["m"] == 1:
+        gains = gains_one(ops, k, hp, innovation_variance(ops, k, hp))  # K = Pl H^T / S
+    else:
+        gains = gains_two(ops, k, hp)                                 # K = Pl H^T S^-1
+    state = update_corrections(ops, k, xl, pl, update_products(ops, k, gains, e, hp))  # x += K e; P -= K H Pl
+    return state, _outputs(k, [state[f"x{i + 1}"] for i in range(n)], yh)
+
+
+# -- what the spec needs ----------------------------------------------------------------------------
+
+
+def _matrix_constants(params):
+    """F and H entries: exact when 0 or +-2**k, else quantised into ``f`` (F only)."""
+    out, flags = {}, {}
+    for i, row in enumerate(params.F):
+        for j, v in enumerate(row):
+            if v != 0:
+                out[f"F{i}{j}"] = Constant(v, exact_format(v) if free(v) else "f")
+                flags[f"F{i}{j}"] = free(v)
+    for j, row in enumerate(params.H):
+        for i, v in enumerate(row):
+            if v != 0:
+                out[f"H{j}{i}"] = Constant(v, exact_format(v))
+                flags[f"H{j}{i}"] = True
+    return out, flags
+
+
+def _structure(params):
+    from kfpga.fixed import QFormat
+
+    return {"n": params.n, "m": params.m, "observations": params.observations, "zero": Constant(0.0, QFormat(2, 0))}
+
+
+def _steady_constants(params):
+    consts, flags = _matrix_constants(params)
+    gain = steady_gain(params)
+    for i in range(params.n):
+        for j in range(params.m):
+            consts[f"K{i}{j}"] = Constant(float(gain[i][j]), f"k{i + 1}")
+    return {**consts, "free": flags, **_structure(params)}
+
+
+def _full_constants(params):
+    consts, flags = _matrix_constants(params)
+    _, gqg, _, r = params.arrays()
+    n, m = params.n, params.m
+    for i in range(n):
+        for j in range(i, n):
+            if gqg[i][j] != 0:
+                consts[f"GQG{i}{j}"] = Constant(float(gqg[i][j]), f"pl{i + 1}{j + 1}")
+    for a in range(m):
+        for b in range(a, m):
+            consts[f"R{a}{b}"] = Constant(float(r[a][b]), "s" if m == 1 else f"s{a + 1}{b + 1}")
+    return {**consts, "free": flags, **_structure(params)}
+
+
+def _initial(params):
+    return {f"x{i + 1}": params.x0[i] for i in range(params.n)}
+
+
+def _full_initial(params):
+    out = _initial(params)
+    for i in range(params.n):
+        for j in range(i, params.n):
+            out[f"p{i + 1}{j + 1}"] = params.P0[i][j]
+    return out
+
+
+def _steady_applies(params):
+    if params.gain is not None:
+        return None
+    try:
+        _check_pbh(params)
+    except PBHError as exc:
+        return f"model: {exc}"
+    return None
+
+
+def _full_applies(params):
+    for i, row in enumerate(params.F):
+        for j, v in enumerate(row):
+            if not free(v):
+                return (f"model.F[{i}][{j}] = {v!r}: the time-varying variant needs F's entries to be 0 or +-2**k "
+                        "(its products by F are then shifts); with this F use the steady variant")
+    return None
+
+
+def _steady_state(params):
+    return tuple((f"x{i + 1}", f"x{i + 1}") for i in range(params.n))
+
+
+def _full_state(params):
+    tri = [(i, j) for i in range(params.n) for j in range(i, params.n)]
+    return _steady_state(params) + tuple((f"p{i + 1}{j + 1}", f"p{i + 1}{j + 1}") for i, j in tri)
+
+
+VARIANT_SPECS = {
+    "steady": Variant("steady", "constant gain K from the Riccati equation (or given): no divider",
+                      _steady_state, _steady_constants, _initial, steady_update, _steady_applies),
+    "full": Variant("full", "time-varying gain: P, S and a restoring divider per update (two observations: "
+                            "model only)", _full_state, _full_constants, _full_initial, full_update, _full_applies),
+}
+
+
+def _points_for(params):
+    n, m = params.n, params.m
+    names = [f"x{i + 1}" for i in range(n)] + [f"xl{i + 1}" for i in range(n)]
+    names += [f"yh{j + 1}" for j in range(m)] + [f"e{j + 1}" for j in range(m)] + [f"k{i + 1}" for i in range(n)]
+    if any(not free(v) for row in params.F for v in row):
+        names += ["f"] + [f"xo{j + 1}" for j in range(n) if any(not free(params.F[i][j]) for i in range(n))]
+    tri = [(i, j) for i in range(n) for j in range(i, n)]
+    names += [f"p{i + 1}{j + 1}" for i, j in tri] + [f"pl{i + 1}{j + 1}" for i, j in tri]
+    names += ["s"] if m == 1 else ["s11", "s12", "s22", "det", "kn"]
+    return [p for p in POINTS if p in names]
+
+
+def _all_points():
+    pts = []
+    for i in range(1, MAX_STATES + 1):
+        pts.append(Point(f"x{i}", f"state x{i} (output)"))
+    for i in range(1, MAX_STATES + 1):
+        pts.append(Point(f"xl{i}", f"predicted state xl{i} = (F x){i}", same_as=f"x{i}"))
+    for j in range(1, MAX_OBS + 1):
+        pts.append(Point(f"yh{j}", f"predicted observation yhat{j} = (H xl){j} (output)"))
+    for j in range(1, MAX_OBS + 1):
+        pts.append(Point(f"e{j}", f"innovation e{j} = y{j} - yhat{j}", role="operand"))
+    for i in range(1, MAX_STATES + 1):
+        pts.append(Point(f"k{i}", f"gains of state {i}: row {i} of K (constants, or the divider's quotients)",
+                         role="operand"))
+    pts.append(Point("f", "entries of F that are not 0 or +-2**k (constants)", role="operand", constant=True))
+    for j in range(1, MAX_STATES + 1):
+        pts.append(Point(f"xo{j}", f"state x{j} rounded into the operand of its products by F", role="operand"))
+    for i in range(1, MAX_STATES + 1):
+        for j in range(i, MAX_STATES + 1):
+            pts.append(Point(f"p{i}{j}", f"covariance P{i}{j} (state)", variants=("full",), frac=f"pl{i}{j}"))
+    for i in range(1, MAX_STATES + 1):
+        for j in range(i, MAX_STATES + 1):
+            pts.append(Point(f"pl{i}{j}", f"predicted covariance Pl{i}{j}", role="operand", variants=("full",)))
+    pts.append(Point("s", "innovation variance S = H Pl H^T + R (divisor)", variants=("full",), frac="pl11"))
+    for name, what in (("s11", "S11"), ("s12", "S12"), ("s22", "S22")):
+        pts.append(Point(name, f"innovation covariance {what} (two observations)", role="operand", variants=("full",)))
+    pts.append(Point("det", "det S = S11 S22 - S12^2 (the divisor, two observations)", variants=("full",), frac="s11"))
+    pts.append(Point("kn", "numerators of K = Pl H^T adj(S) (two observations)", variants=("full",), frac="pl11"))
+    return {p.name: p for p in pts}
+
+
+POINTS = _all_points()
+
+
+def _inputs(params):
+    return tuple((name, f"observation {j + 1}") for j, name in enumerate(params.observations))
+
+
+def _outputs_for(params):
+    out = [Output(f"x{i + 1}", f"x{i + 1}", f"filtered state {i + 1}") for i in range(params.n)]
+    out += [Output(f"yhat{j + 1}", f"yh{j + 1}", f"one-step prediction of {params.observations[j]}")
+            for j in range(params.m)]
+    return tuple(out)
+
+
+def _stimulus(params):
+    """Full-scale stimulus for every observation: the same rows, each observation's phase moved."""
+    base = full_scale_stimulus(float(np.max(np.diag(params.R))))
+    return {name: np.roll(base, 997 * j, axis=1) for j, name in enumerate(params.observations)}
+
+
+def _ranges(params, stimulus=None):
+    stimulus = _stimulus(params) if stimulus is None else stimulus
+    variants = [v for name, v in VARIANT_SPECS.items() if v.applies(params) is None]
+    return float_ranges(SPEC, params, variants, stimulus)
+
+
+def _default_formats(params, ranges, *, operand_bits, state_frac):
+    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac)
+    # a predicted observation that is one predicted state (H selects it) keeps that state's format:
+    # then it is no extra logic
+    for j, row in enumerate(params.H):
+        picks = [i for i, h in enumerate(row) if h != 0]
+        if len(picks) == 1 and row[picks[0]] == 1:
+            formats[f"yh{j + 1}"] = formats[f"xl{picks[0] + 1}"]
+    return formats
+
+
+def _validate(config):
+    f, params = config.formats, config.params
+    for i, v in enumerate(params.x0):
+        if not f[f"x{i + 1}"].covers(abs(v)):
+            raise ConfigError(f"model.x0[{i}] = {v:g} does not fit formats.x{i + 1} = {f[f'x{i + 1}']}")
+    names = {name for name, _ in config.spec.variants["full"].state_for(params)}
+    if config.spec.variants["full"].applies(params) is None:
+        for i in range(params.n):
+            for j in range(i, params.n):
+                name = f"p{i + 1}{j + 1}"
+                if name in names and not f[name].covers(abs(params.P0[i][j])):
+                    raise ConfigError(f"model.P0[{i}][{j}] = {params.P0[i][j]:g} does not fit formats.{name} = {f[name]}")
+        r_point = "s" if params.m == 1 else "s11"
+        if f[r_point].lsb / 2 > min(params.R[j][j] for j in range(params.m)):
+            raise ConfigError(f"model.R rounds to 0 in formats.{r_point} = {f[r_point]} (LSB {f[r_point].lsb:g}): the "
+                              f"divisor could be 0; give {r_point} more fraction bits")
+
+
+def _reference(params, variant, y):
+    return reference(params, variant, y)
+
+
+def _goals(config, variant, channels=1):
+    """Logic cells per state and observation; every multiplier the model needs; 75 MHz."""
+    params = config.params
+    n, m = params.n, params.m
+    extra = sum(1 for row in params.F for v in row if not free(v))
+    if variant == "steady":
+        return {"logic_cells": 250 * n + 150 * m + 150 * n * (channels - 1), "mul18": n * m + extra, "lut_levels": 16,
+                "worst_path_ns": round(1000.0 / 75.0, 2)}
+    return {"logic_cells": 900 * n + 300 * n * (channels - 1), "mul18": 4, "lut_levels": 16,
+            "worst_path_ns": round(1000.0 / 75.0, 2)}
+
+
+def _random_params(rng):
+    n = int(rng.integers(1, MAX_STATES + 1))
+    m = int(rng.integers(1, min(n, MAX_OBS) + 1))
+    t = float(rng.choice([1.0, 0.5, 0.25]))
+    f = np.eye(n)
+    for i in range(n - 1):
+        f[i, i + 1] = t
+        if i + 2 < n:
+            f[i, i + 2] = t * t / 2 if free(t * t / 2) else 0.0
+    g = np.zeros((n, 1))
+    g[-1, 0] = 1.0
+    h = np.zeros((m, n))
+    for j in range(m):
+        h[j, j] = 1.0
+    a = rng.normal(size=(n, n))
+    p0 = a @ a.T + rng.uniform(0.5, 8) * np.eye(n)
+    r = np.diag(rng.uniform(0.5, 20.0, m))
+    return StateSpaceParams(F=tuple(map(tuple, f)), G=tuple(map(tuple, g)), Q=((float(rng.uniform(0.05, 5.0)),),),
+                            H=tuple(map(tuple, h)), R=tuple(map(tuple, r)), P0=tuple(map(tuple, (p0 + p0.T) / 2)),
+                            x0=tuple(float(v) for v in rng.normal(0, 20, n)), T=t)
+
+
+def _scenario(name, count, seed, params):
+    """The scenarios of ``kfpga/scenarios.py`` for the first state (a position, an angle), its
+    derivatives for the others, each observation its row of H plus noise of variance R_jj."""
+    from kfpga import scenarios
+
+    rng = np.random.default_rng(seed)
+    if name == "sine":
+        k = np.arange(count)
+        w = 2 * np.pi / scenarios.SINE_PERIOD
+        a = scenarios.SINE_AMPLITUDE
+        # per sample: x1 = a sin(w k), x2 = x1 per unit time (T), x3 = x2 per unit time
+        truth = np.stack([a * (w / params.T) ** d * np.sin(w * k + d * np.pi / 2) for d in range(params.n)])
+    elif name == "random-accel":
+        t, q = params.T, float(np.array(params.Q)[0, 0])
+        truth = np.zeros((params.n, count))
+        x = np.zeros(params.n)
+        f = np.array(params.F)
+        g = np.array(params.G)[:, 0]
+        for step in range(count):
+            truth[:, step] = x
+            x = f @ x + g * rng.normal(0.0, np.sqrt(q))
+            x *= 1 - 1e-3 * t  # a weak pull toward zero keeps the track within the ADC range
+    else:
+        raise ValueError(f"scenario must be one of {', '.join(scenarios.SCENARIOS)}, not {name!r}")
+    h, r = np.array(params.H), np.array(params.R)
+    codes = {}
+    for j, obs in enumerate(params.observations):
+        clean = h[j] @ truth
+        codes[obs] = scenarios.adc_codes(clean + rng.normal(0.0, np.sqrt(r[j, j]), count))
+    y = codes[params.observations[0]] if params.m == 1 else codes
+    return truth[0], y
+
+
+def _preset_ca3():
+    t = 0.5
+    return StateSpaceParams(F=((1.0, t, t * t / 2), (0.0, 1.0, t), (0.0, 0.0, 1.0)), G=((1.0, 0.0, 0.0), (0.0, 1.0, 0.0),
+                            (0.0, 0.0, 1.0)), Q=((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), H=((1.0, 0.0, 0.0),),
+                            R=((0.01,),), P0=((10.0, 0.0, 0.0), (0.0, 10.0, 0.0), (0.0, 0.0, 10.0)), x0=(0.0, 0.0, 0.0),
+                            T=t, observations=("roll",))
+
+
+def _preset_va2():
+    return StateSpaceParams(F=((1.0, 1.0), (0.0, 1.0)), G=((0.0,), (1.0,)), Q=((0.05,),), H=((1.0, 0.0), (0.0, 1.0)),
+                            R=((4.0, 0.0), (0.0, 1.0)), P0=((10.0, 0.0), (0.0, 10.0)), x0=(0.0, 0.0), T=1.0,
+                            observations=("velocity", "acceleration"))
+
+
+def _preset_alpha_beta():
+    alpha, beta = 0.5, 0.5
+    return StateSpaceParams(F=((1.0, 1.0), (0.0, 1.0)), gain=((alpha,), (beta,)), T=1.0)
+
+
+#: Named models: ``--preset NAME``. ``cv2`` is the paper's filter itself (the ``kalman2`` filter,
+#: which keeps its own datapath: the rate scaled by T, both halves of P); the others are models of
+#: this general filter.
+PRESETS = {
+    "ca3": ("constant acceleration, T = 0.5 s (seeds/000, the ship-roll predictor; A's bottom-right entry 1; "
+            "P0 = 10 I, as the paper's all-10s matrix is singular)", _preset_ca3),
+    "va2": ("velocity and acceleration, both observed (seeds/003, fed by the least-squares front end)", _preset_va2),
+    "alpha-beta": ("fixed gain alpha = beta = 0.5 on the constant-velocity model (seeds/004's values)",
+                   _preset_alpha_beta),
+}
+
+
+SPEC = FilterSpec(
+    name="kalman",
+    summary="any linear state-space model: n = 1..4 states, m = 1..2 observations, from F, G, Q, H, R",
+    source="SPEC §1, §4, §8: the general form of seeds/000, 001, 003, 004",
+    params=StateSpaceParams,
+    points=POINTS,
+    inputs=_inputs,
+    outputs=_outputs_for,
+    variants=VARIANT_SPECS,
+    points_for=_points_for,
+    default_formats=_default_formats,
+    ranges=_ranges,
+    validate=_validate,
+    reference=_reference,
+    core="kfpga.hw.kalman:make_core",
+    goals=_goals,
+    default_output="x1",
+    random_params=_random_params,
+    scenario=_scenario,
+    presets=PRESETS,
+)
