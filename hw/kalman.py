@@ -1,8 +1,8 @@
 """Cores of the general state-space filter (``model/kalman.py``), from its own stage functions.
 
-* :class:`SteadyCore`: x = F x + K (y - H F x) over four register stages, channels interleaved
-  (:class:`~kfpga.hw.core.LoopPipeline`): predict; observe and innovate; the products K e;
-  correct. Any n = 1..4, m = 1..2; with m = 2 both samples of an update come in one word.
+* :class:`SteadyCore`: x = F x + K (y - H F x) over four or five register stages, channels
+  interleaved (:class:`~kfpga.hw.core.LoopPipeline`): predict; observe and innovate; the
+  products K e; correct. Any n = 1..4, m = 1..2; with m = 2 both samples of an update come in one word.
 * :class:`FullCore`: the time-varying filter for one observation on one shared multiplier and one
   shared restoring divider, a hand-written schedule (below). Two observations are model-only.
 """
@@ -22,16 +22,22 @@ from kfpga.hw.storage import at, select
 from kfpga.model import kalman as eq
 from kfpga.ops import Fx, divider_shift, quotient_bits
 
-__all__ = ["SteadyCore", "FullCore", "make_core"]
+__all__ = ["SteadyCore", "FullCore", "make_core", "default_stages"]
 
 
 def _states(k, live):
     return [live[f"x{i + 1}"] for i in range(k["n"])]
 
 
-def _predict(ops, k, live):
-    for i, v in enumerate(eq.predict(ops, k, _states(k, live))):               # xl = F x
-        live[f"xl{i + 1}"] = v
+def _predict_sums(ops, k, live):
+    for i, v in enumerate(eq.predict_sums(ops, k, _states(k, live))):          # F x, exact
+        live[f"xs{i + 1}"] = v
+    return live
+
+
+def _predict_round(ops, k, live):
+    for i in range(k["n"]):                                                     # xl = [F x]_xl
+        live[f"xl{i + 1}"] = ops.rq(live[f"xs{i + 1}"], f"xl{i + 1}")
     return live
 
 
@@ -64,27 +70,36 @@ _ALL = range(1, 5)
 _OBS = range(1, 3)
 
 
+def default_stages(params):
+    """The register stages of the steady loop when none are asked for: 4, or 5 when a row of F
+    sums three or more states (its exact sum and its rounding then get a stage each)."""
+    return 5 if any(sum(1 for v in row if v != 0) >= 3 for row in params.F) else 4
+
+
 class SteadyCore(LoopPipeline):
     """The steady-state filter of any model: x = xl + K e, xl = F x, e = y - H xl.
 
-    Four steps, one register stage each by default (``stages`` 1..4, :data:`CUTS`): xl = F x;
-    yh = H xl and e = y - yh; the products K e; x = xl + K e. One channel takes a sample every
-    L cycles, C >= L channels in turn one per clock. Parameters and members as
+    Five steps (``stages`` 1..5 register stages, :attr:`cuts`): the exact sums F x; their
+    rounding xl = [F x]; yh = H xl and e = y - yh; the products K e; x = xl + K e. With four
+    stages the first two steps share one, with fewer the steps are grouped further. One
+    channel takes a sample every L cycles, C >= L channels in turn one per clock. The default
+    L is :func:`default_stages`. Parameters and members as
     :class:`~kfpga.hw.kalman2.SteadyKalman`; the input word has one field per observation.
     """
 
-    steps = (_predict, _observe, _products, _correct)
-    reads = ({f"x{i}" for i in _ALL}, {f"xl{i}" for i in _ALL} | {"y", "y1", "y2"}, {f"e{j}" for j in _OBS},
-             {f"xl{i}" for i in _ALL} | {f"ke{i}{j}" for i in range(4) for j in range(2)})
-    cuts: ClassVar[dict] = MappingProxyType({1: (), 2: (2,), 3: (1, 3), 4: (1, 2, 3)})
+    steps = (_predict_sums, _predict_round, _observe, _products, _correct)
+    reads = ({f"x{i}" for i in _ALL}, {f"xs{i}" for i in _ALL}, {f"xl{i}" for i in _ALL} | {"y", "y1", "y2"},
+             {f"e{j}" for j in _OBS}, {f"xl{i}" for i in _ALL} | {f"ke{i}{j}" for i in range(4) for j in range(2)})
+    cuts: ClassVar[dict] = MappingProxyType({1: (), 2: (3,), 3: (2, 4), 4: (2, 3, 4), 5: (1, 2, 3, 4)})
     carry = ("yh1", "yh2")
 
-    def __init__(self, config, *, channels=1, stages=4):
+    def __init__(self, config, *, channels=1, stages=None):
         n = config.params.n
         self.writes = {f"x{i + 1}": f"x{i + 1}_next" for i in range(n)}
-        # the observations' names are the model's own: the step after predict reads them
+        # the observations' names are the model's own: the step after the prediction reads them
         names = set(config.inputs)
-        self.reads = (self.reads[0], self.reads[1] | names, self.reads[2], self.reads[3])
+        self.reads = (*self.reads[:2], self.reads[2] | names, *self.reads[3:])
+        stages = default_stages(config.params) if stages is None else stages
         super().__init__(config, "steady", channels=channels, stages=stages)
 
     def outputs(self, live):
@@ -108,10 +123,11 @@ class FullCore(Core):
         DIV    n divisions K_i = (H Pl)_i / S, one after the other on one divider
                (quotient_bits + 2 cycles each)
         MUL    the n + n(n+1)/2 products K_i e and K_i (H Pl)_j, one per cycle on one multiplier
+               whose operands are registered (one more cycle)
         WB     x = [xl + K e]_x, P = [Pl - K H Pl]_p, written back; flags registered
         OUT    the estimate out
 
-    :attr:`cycles_per_update` is ``5 + n (quotient_bits + 2) + n + n(n+1)/2 + 2``. Parameters and
+    :attr:`cycles_per_update` is ``5 + n (quotient_bits + 2) + n + n(n+1)/2 + 3``. Parameters and
     members as :class:`SteadyCore` (no ``stages``).
     """
 
@@ -133,7 +149,7 @@ class FullCore(Core):
     @property
     def cycles_per_update(self):
         """Cycles from accepting one sample to being able to accept the next (``o`` always ready)."""
-        return 1 + 4 + self.n * self.divide_cycles + len(self.products) + 1 + 1
+        return 1 + 4 + self.n * self.divide_cycles + len(self.products) + 1 + 1 + 1
 
     @property
     def latency(self):
@@ -149,7 +165,13 @@ class FullCore(Core):
         obs = self.config.inputs[0]
         sample = Signal(signed(CODE_FORMAT.width))
         work = {nm: Signal(signed(f[self.state_points[nm]].width), name=f"{nm}_w") for nm in names}
-        flags = Signal()  # OR of the overflow flags of this update so far
+        # the overflow flags of each step, registered as they are (ORed only when the word is written)
+        step_flags = []
+
+        def keep_flags(ops, tag):
+            reg = Signal(max(len(ops.flags), 1), name=f"{tag}_flags")
+            step_flags.append(reg)
+            return reg.eq(Cat(*(flag for _, flag in ops.flags)) if ops.flags else 0)
 
         def fx(signal, point):
             return Fx(signal.as_signed(), f[point].frac_bits, None, f[point], point)
@@ -214,11 +236,13 @@ class FullCore(Core):
         pairs = [(operands_a[p[1]], e_r if p[0] == "e" else hp_fx[p[2]]) for p in self.products]
         width_a = max(len(a.raw) for a, _ in pairs)
         width_b = max(len(b.raw) for _, b in pairs)
+        # the operands are registered: the mux in front of the multiplier gets a cycle of its own
         sel_a, sel_b = Signal(signed(width_a)), Signal(signed(width_b))
         m.d.comb += [sel_a.eq(select([a.raw.as_signed() for a, _ in pairs], index)),
                      sel_b.eq(select([b.raw.as_signed() for _, b in pairs], index))]
+        op_a, op_b = Signal(signed(width_a), name="op_a"), Signal(signed(width_b), name="op_b")
         product = Signal(signed(width_a + width_b), name="product")
-        m.d.comb += product.eq(sel_a * sel_b)
+        m.d.comb += product.eq(op_a * op_b)
         prod_regs = [Signal(signed(len(a.raw) + len(b.raw)), name=f"prod{idx}") for idx, (a, b) in enumerate(pairs)]
         products = {p: Fx(prod_regs[idx], pairs[idx][0].frac + pairs[idx][1].frac) for idx, p in enumerate(self.products)}
 
@@ -228,7 +252,8 @@ class FullCore(Core):
         wb_bits = Signal(len(wb.flags), name="wb_flags")
         done = {nm: Signal(signed(f[self.state_points[nm]].width), name=f"{nm}_done") for nm in (f"x{i + 1}" for i in range(n))}
 
-        self.flag_outputs(m, 2)
+        div_flags = Signal(name="div_flags")
+        self.flag_outputs(m, 4 + 2)
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
 
@@ -240,21 +265,22 @@ class FullCore(Core):
                     m.next = "T1"
             with m.State("T1"):
                 m.d.sync += [a for _, a in xl_sum] + [a for row in fp for _, a in row]
-                m.d.sync += flags.eq(t1.overflow())
+                m.d.sync += keep_flags(t1, "t1")
                 m.next = "T2"
             with m.State("T2"):
                 m.d.sync += [a for _, a in xl] + [a for _, a in pl_sum.values()]
-                m.d.sync += flags.eq(flags | t2.overflow())
+                m.d.sync += keep_flags(t2, "t2")
                 m.next = "T3"
             with m.State("T3"):
                 m.d.sync += [a for _, a in pl.values()] + [yh_assign, e_assign]
-                m.d.sync += flags.eq(flags | t3.overflow())
+                m.d.sync += keep_flags(t3, "t3")
                 m.next = "T4"
             with m.State("T4"):
                 m.d.sync += [nums[i].eq(magnitude(hp[0][i].raw, shifts[i])) for i in range(n)]
                 m.d.sync += [hp_r[j].eq(hp[0][j].raw) for j in range(n)]
                 m.d.sync += [hp_sign.eq(Cat(*(hp[0][i].raw < 0 for i in range(n)))), index.eq(0)]
-                m.d.sync += [den.eq(Mux(s.raw > 0, s.raw.as_unsigned(), 0)), flags.eq(flags | t4.overflow())]
+                m.d.sync += [den.eq(Mux(s.raw > 0, s.raw.as_unsigned(), 0)), keep_flags(t4, "t4"),
+                             div_flags.eq(0)]
                 m.next = "GO"  # S <= 0 becomes a zero divisor (the quotient saturates)
             with m.State("GO"):
                 m.next = "DIV"
@@ -264,19 +290,19 @@ class FullCore(Core):
                         for i in range(n):
                             with m.Case(i):
                                 m.d.sync += gains[i].eq(Mux(hp_sign[i], -quotient, quotient))
-                    m.d.sync += [flags.eq(flags | saturate), index.eq(index + 1)]
+                    m.d.sync += [div_flags.eq(div_flags | saturate), index.eq(index + 1)]
                     with m.If(index == n - 1):
                         m.d.sync += index.eq(0)
                         m.next = "MUL"
                     with m.Else():
                         m.next = "GO"
-            with m.State("MUL"):
+            with m.State("MUL"):  # cycle c loads the operands of product c and stores product c - 1
+                m.d.sync += [op_a.eq(sel_a), op_b.eq(sel_b), index.eq(index + 1)]
                 with m.Switch(index):
-                    for idx, reg in enumerate(prod_regs):
+                    for idx, reg in enumerate(prod_regs, start=1):
                         with m.Case(idx):
                             m.d.sync += reg.eq(product)
-                m.d.sync += index.eq(index + 1)
-                with m.If(index == len(self.products) - 1):
+                with m.If(index == len(self.products)):
                     m.next = "WB"
             with m.State("WB"):
                 m.d.sync += [at(regs[nm], channel).eq(state[nm].raw) for nm in names]
@@ -288,7 +314,7 @@ class FullCore(Core):
                     m.d.sync += self.o.valid.eq(1)
                     outputs = {nm: Fx(done[nm], 0) for nm in done}
                     outputs["yhat1"] = yh_r
-                    write_estimate(m, self, channel, outputs, [flags, wb_bits.any()])
+                    write_estimate(m, self, channel, outputs, [r.any() for r in step_flags] + [div_flags, wb_bits.any()])
                     m.next = "IDLE"
         # plain assignments (Verilog `assign`), not case-statement outputs: no simulator can
         # leave them undefined at time zero while the state has not changed yet
@@ -296,10 +322,13 @@ class FullCore(Core):
         return m
 
 
-def make_core(config, variant, *, channels=1):
-    """The core of ``variant`` ("steady" or "full")."""
+def make_core(config, variant, *, channels=1, stages=None):
+    """The core of ``variant`` ("steady" or "full"); ``stages``: L of the steady loop (default
+    :func:`default_stages`), which the time-varying core does not have."""
     if variant == "steady":
-        return SteadyCore(config, channels=channels)
+        return SteadyCore(config, channels=channels, stages=stages)
     if variant == "full":
+        if stages is not None:
+            raise ValueError("stages applies to the steady variant's loop; the time-varying core has a fixed schedule")
         return FullCore(config, channels=channels)
     raise ValueError(f"variant must be 'steady' or 'full', not {variant!r}")

@@ -305,10 +305,13 @@ class FullKalman(Core):
         return m
 
 
-def make_core(config, variant, *, channels=1):
-    """The core of ``variant`` ("steady" or "full"), each with the stages that meet 50 MHz."""
+def make_core(config, variant, *, channels=1, stages=None):
+    """The core of ``variant`` ("steady" or "full"), each with the stages that meet 50 MHz;
+    ``stages``: L of the steady loop (default 4), which the time-varying core does not have."""
     if variant == "steady":
-        return SteadyKalman(config, channels=channels)
+        return SteadyKalman(config, channels=channels, stages=4 if stages is None else stages)
     if variant == "full":
+        if stages is not None:
+            raise ValueError("stages applies to the steady variant's loop; the time-varying core has a fixed schedule")
         return FullKalman(config, channels=channels)
     raise ValueError(f"variant must be 'steady' or 'full', not {variant!r}")

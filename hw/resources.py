@@ -68,6 +68,7 @@ peepopt
 opt_clean
 techmap -map +/mul2dsp.v -D DSP_A_MAXWIDTH=18 -D DSP_B_MAXWIDTH=18 -D DSP_A_MINWIDTH=2 -D DSP_B_MINWIDTH=2 -D DSP_NAME=$__kfpga_mul
 chtype -set kfpga_mul t:$__kfpga_mul
+chtype -set $mul t:$__soft_mul
 """
 
 _SYNTH = _FRONT + """

@@ -8,8 +8,9 @@ import numpy as np
 
 from kfpga.config import FilterConfig, analysed_ranges, default_formats
 from kfpga.fixedmodel import FixedModel
+from kfpga.formats import MAX_OPERAND_BITS
 
-__all__ = ["rmse", "sqnr_db", "float_run", "Comparison", "compare", "sweep", "plot_compare", "plot_sweep"]
+__all__ = ["sample_count", "rmse", "sqnr_db", "float_run", "Comparison", "compare", "sweep", "plot_compare", "plot_sweep"]
 
 
 def rmse(estimate, truth):
@@ -35,7 +36,7 @@ class Comparison:
     """Result of one fixed-versus-float run; ``metrics`` is what ``--json`` prints."""
 
     metrics: dict
-    y: np.ndarray
+    y: np.ndarray | None  # the input that observes the main output (None if no input does)
     truth: np.ndarray | None
     float_out: np.ndarray
     fixed_out: np.ndarray
@@ -53,8 +54,12 @@ def compare(config, variant, y, truth=None, *, settle=None, seed=None, scenario=
     tenth of short runs), where both filters are still converging; the other figures use every
     sample. ``fields`` gives the fixed - float difference of every output.
     """
-    y = np.asarray(y, dtype=np.int64)
-    n = len(y)
+    codes = {k: np.asarray(v, dtype=np.int64) for k, v in y.items()} if isinstance(y, dict) else None
+    y = codes if codes is not None else np.asarray(y, dtype=np.int64)
+    n = sample_count(y)
+    # the raw input that observes the main output, for the "raw" RMSE and the plot
+    measured = config.spec.measured_input(config.params)
+    raw = (codes.get(measured) if codes is not None else y) if measured is not None else None
     settle = min(100, n // 10) if settle is None else settle
     if not 0 <= settle < n:
         raise ValueError(f"settle must be in [0, {n}), not {settle}")
@@ -81,7 +86,8 @@ def compare(config, variant, y, truth=None, *, settle=None, seed=None, scenario=
         "seed": seed,
         "settle": settle,
         "field": main,
-        "rmse_raw": rmse(y[w], truth[w]) if truth is not None else None,
+        "measured_input": measured,
+        "rmse_raw": rmse(raw[w], truth[w]) if truth is not None and raw is not None else None,
         "rmse_float": rmse(flx1[w], truth[w]) if truth is not None else None,
         "rmse_fixed": rmse(fx1[w], truth[w]) if truth is not None else None,
         "rmse_fixed_over_float": None,
@@ -96,13 +102,18 @@ def compare(config, variant, y, truth=None, *, settle=None, seed=None, scenario=
     }
     if truth is not None and metrics["rmse_float"] > 0:
         metrics["rmse_fixed_over_float"] = metrics["rmse_fixed"] / metrics["rmse_float"]
-    return Comparison(metrics, y, truth, flx1, fx1, lsb, settle, main)
+    return Comparison(metrics, raw, truth, flx1, fx1, lsb, settle, main)
 
 
 def sweep_config(params, width, ranges):
     """Formats for a sweep point: operands ``width`` bits, registers ``width - 10`` fraction bits."""
     formats = default_formats(params, ranges=ranges, operand_bits=width, state_frac=max(width - 10, 0))
-    return FilterConfig(params=params, formats=formats, check_ranges=False, max_operand_bits=max(width, 18))
+    return FilterConfig(params=params, formats=formats, check_ranges=False, max_operand_bits=max(width, MAX_OPERAND_BITS))
+
+
+def sample_count(y):
+    """The number of samples of ``y`` (an array, or ``{input: array}``)."""
+    return len(next(iter(y.values()))) if isinstance(y, dict) else len(y)
 
 
 def sweep(params, variant, y, truth, widths, *, settle=None, range_source="scenario", progress=None):
@@ -111,7 +122,7 @@ def sweep(params, variant, y, truth, widths, *, settle=None, range_source="scena
     ``range_source`` picks the float run the integer bits come from: the swept signal itself
     (``"scenario"``) or the full-scale stimulus (``"full-scale"``).
     """
-    ranges = analysed_ranges(params, y[None, :] if range_source == "scenario" else None)
+    ranges = analysed_ranges(params, y if range_source == "scenario" else None)
     rows = []
     iterator = progress(widths) if progress else widths
     for width in iterator:
@@ -152,8 +163,10 @@ def _pyplot():
 def plot_compare(cmp_, path, title=""):
     """Overview, a zoomed window, the estimation errors and the fixed - float difference."""
     plt = _pyplot()
-    n = len(cmp_.y)
+    n = len(cmp_.fixed_out)
     k = np.arange(n)
+    raw = cmp_.y  # None when no input observes the plotted output itself
+    label = f"noisy input {cmp_.metrics.get('measured_input') or 'y'}"
     # the zoom: 60 samples around the largest |signal| after settling (a peak, where the slope
     # is small), so single noisy samples and the two estimates can be told apart
     ref = cmp_.truth if cmp_.truth is not None else cmp_.float_out
@@ -162,7 +175,8 @@ def plot_compare(cmp_, path, title=""):
     z = slice(z0, min(z0 + 60, n))
     fig, axes = plt.subplots(4, 1, figsize=(11, 12), constrained_layout=True)
     ax = axes[0]
-    ax.plot(k, cmp_.y, lw=0.4, color="0.7", label="noisy input y")
+    if raw is not None:
+        ax.plot(k, raw, lw=0.4, color="0.7", label=label)
     if cmp_.truth is not None:
         ax.plot(k, cmp_.truth, lw=1.0, color="k", label="truth")
     ax.plot(k, cmp_.fixed_out, lw=0.8, color="tab:red", label=f"fixed {cmp_.output}")
@@ -171,7 +185,8 @@ def plot_compare(cmp_, path, title=""):
     ax.legend(loc="upper right", fontsize=8)
     ax.set_title(title)
     ax = axes[1]
-    ax.plot(k[z], cmp_.y[z], ".", ms=5, color="0.55", label="noisy input y")
+    if raw is not None:
+        ax.plot(k[z], raw[z], ".", ms=5, color="0.55", label=label)
     if cmp_.truth is not None:
         ax.plot(k[z], cmp_.truth[z], lw=1.4, color="k", label="truth")
     ax.plot(k[z], cmp_.float_out[z], lw=1.0, color="tab:blue", label=f"float {cmp_.output}")
@@ -180,7 +195,8 @@ def plot_compare(cmp_, path, title=""):
     ax.legend(loc="upper right", fontsize=8)
     ax = axes[2]
     if cmp_.truth is not None:
-        ax.plot(k, cmp_.y - cmp_.truth, lw=0.3, color="0.8", label="input - truth")
+        if raw is not None:
+            ax.plot(k, raw - cmp_.truth, lw=0.3, color="0.8", label="input - truth")
         ax.plot(k, cmp_.float_out - cmp_.truth, lw=0.4, color="tab:blue", label="float - truth")
         ax.plot(k, cmp_.fixed_out - cmp_.truth, lw=0.4, color="tab:red", alpha=0.6, label="fixed - truth")
         ax.axvline(cmp_.settle, color="0.4", ls=":", lw=0.8, label="end of settling")

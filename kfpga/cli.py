@@ -53,9 +53,21 @@ def _load_config(args):
     from kfpga.config import FilterConfig
 
     name = getattr(args, "filter", None)
+    preset = getattr(args, "preset", None)
     if name is not None and name not in registry.names():
         raise UsageError(f"--filter: no filter named {name!r}; registered: {', '.join(registry.names())}")
-    if args.config:
+    if preset is not None:
+        if args.config:
+            raise UsageError(f"--preset and --config both give the model: use one (to edit the preset, write it with "
+                             f"'kfpga formats --preset {preset} --toml > {preset}.toml' and pass --config {preset}.toml)")
+        known = registry.presets()
+        if preset not in known:
+            raise UsageError(f"--preset: no preset named {preset!r}; presets: {', '.join(known)}")
+        filter_name, params = registry.preset(preset)
+        if name is not None and name != filter_name:
+            raise UsageError(f"--filter {name} does not match --preset {preset}, a model of the {filter_name} filter")
+        config = FilterConfig(filter=filter_name, params=params)
+    elif args.config:
         config = FilterConfig.from_toml(args.config)
         if name is not None and name != config.filter:
             raise UsageError(f"--filter {name} does not match {args.config}, whose [filter] name is {config.filter!r}")
@@ -130,12 +142,12 @@ def _samples_for(args, config, *, command, need_truth=False):
 
     notes = []
     if args.input:
-        samples = read_samples(args.input, clip=args.clip)
+        samples = read_samples(args.input, clip=args.clip, columns=config.inputs)
         y, truth = samples.y, samples.truth
         if args.samples:
-            if args.samples > len(y):
-                raise UsageError(f"--samples {args.samples} is more than the {len(y)} rows of {args.input}")
-            y = y[: args.samples]
+            if args.samples > len(samples):
+                raise UsageError(f"--samples {args.samples} is more than the {len(samples)} rows of {args.input}")
+            y = {k: v[: args.samples] for k, v in y.items()} if isinstance(y, dict) else y[: args.samples]
             truth = truth[: args.samples] if truth is not None else None
         if samples.clipped:
             notes.append(f"{args.input}: {samples.clipped} value(s) outside the 16-bit range saturated (--clip)")
@@ -147,7 +159,7 @@ def _samples_for(args, config, *, command, need_truth=False):
         label = f"input {args.input}"
     else:
         n = args.samples or 20000
-    count = len(y) if args.input else n
+    count = (args.samples or len(samples)) if args.input else n
     if count < 2:
         raise UsageError(f"{command} needs at least 2 samples, not {count}")
     if args.settle is not None and not 0 <= args.settle < count:
@@ -186,9 +198,18 @@ def _out_field_help():
     return f"the output field that drives out_data ({'; '.join(parts)}); the pin table follows its width"
 
 
-def _add_filter_args(p):
+def _preset_help():
+    from kfpga import registry
+
+    names = ", ".join(f"{n} ({f})" for n, (f, _) in registry.presets().items())
+    return f"a named model instead of --config: {names}; 'kfpga filters' describes them"
+
+
+def _add_filter_args(p, variant=True):
     p.add_argument("--filter", metavar="NAME", help=_filter_help())
-    p.add_argument("--variant", metavar="NAME", help=_variant_help())
+    p.add_argument("--preset", metavar="NAME", help=_preset_help())
+    if variant:
+        p.add_argument("--variant", metavar="NAME", help=_variant_help())
 
 
 def _add_signal_args(p):
@@ -214,7 +235,7 @@ def _add_design_args(p, channels_help):
 
 
 def _run_compare(args):
-    from kfpga.analysis import compare, plot_compare
+    from kfpga.analysis import compare, plot_compare, sample_count
 
     _check_signal_args(args)
     args.plot = _check_plot(args.plot)
@@ -224,7 +245,7 @@ def _run_compare(args):
                      scenario=None if args.input else args.scenario)
     m = result.metrics
     if args.plot:
-        plot_compare(result, args.plot, title=f"kfpga compare: {args.variant} variant, {label}, {len(y)} samples")
+        plot_compare(result, args.plot, title=f"kfpga compare: {args.variant} variant, {label}, {sample_count(y)} samples")
         m["plot"] = args.plot
     if args.json:
         _emit_json(m)
@@ -254,7 +275,7 @@ def _run_compare(args):
 def _run_sweep(args):
     from tqdm import tqdm
 
-    from kfpga.analysis import plot_sweep, sweep
+    from kfpga.analysis import plot_sweep, sample_count, sweep
 
     _check_signal_args(args)
     args.plot = _check_plot(args.plot)
@@ -271,12 +292,12 @@ def _run_sweep(args):
     if plot is None:  # the default goes under ./build, which is made for it
         Path("build").mkdir(exist_ok=True)
         plot = f"build/sweep_{args.variant}.png"
-    plot_sweep(rows, narrowest, plot, title=f"kfpga sweep: {args.variant} variant, {label}, {len(y)} samples")
+    plot_sweep(rows, narrowest, plot, title=f"kfpga sweep: {args.variant} variant, {label}, {sample_count(y)} samples")
     if args.json:
-        _emit_json({"variant": args.variant, "samples": len(y), "seed": args.seed, "ranges": args.ranges,
+        _emit_json({"variant": args.variant, "samples": sample_count(y), "seed": args.seed, "ranges": args.ranges,
                     "narrowest_within_1pct": narrowest, "rows": rows, "plot": plot})
         return 0
-    print(f"kfpga sweep: {args.variant} variant, {label}, {len(y)} samples; integer bits from the {args.ranges} range")
+    print(f"kfpga sweep: {args.variant} variant, {label}, {sample_count(y)} samples; integer bits from the {args.ranges} range")
     print(f"{'bits':>4}  {'output':>7}  {'e':>7}  {'RMSE fixed':>10}  {'vs float':>9}  {'SQNR dB':>8}  {'overflows':>9}")
     for r in rows:
         mark = " *" if r["bits"] == narrowest else ""
@@ -300,7 +321,7 @@ def _run_filter(args):
 
     check_output_file(args.output, option="--output", inputs=(args.input, args.config), extensions=(".csv", ".txt"))
     config = _load_config(args)
-    samples = read_samples(args.input, clip=args.clip)
+    samples = read_samples(args.input, clip=args.clip, columns=config.inputs)
     if args.float:
         columns = dict(float_run(config, args.variant, samples.y))
     else:
@@ -309,7 +330,7 @@ def _run_filter(args):
         columns = {**model.to_float(res), "overflow": res.overflow}
     write_columns(args.output, columns)
     kind = "float64" if args.float else "bit-accurate fixed-point"
-    note = [f"{len(samples.y)} samples filtered ({config.filter} filter, {args.variant} variant, {kind}) -> {args.output}"]
+    note = [f"{len(samples)} samples filtered ({config.filter} filter, {args.variant} variant, {kind}) -> {args.output}"]
     if samples.clipped:
         note.append(f"{samples.clipped} input value(s) saturated to the 16-bit range (--clip)")
     if not args.float:
@@ -660,6 +681,7 @@ def _run_filters(args):
     rows = [{"name": s.name, "summary": s.summary, "variants": {n: v.summary for n, v in s.variants.items()},
              "inputs": [n for n, _ in s.inputs_for(s.params())],
              "outputs": [o.name for o in s.outputs_for(s.params())], "source": s.source,
+             "presets": {n: summary for n, (summary, _) in s.presets.items()},
              "default": s.name == registry.DEFAULT} for s in registry.specs()]
     if args.json:
         _emit_json(rows)
@@ -667,8 +689,10 @@ def _run_filters(args):
     for r in rows:
         print(f"{r['name']:<10} {r['summary']}{' (default)' if r['default'] else ''}")
         for name, summary in r["variants"].items():
-            print(f"  --variant {name:<8} {summary}")
+            print(f"  --variant {name:<9} {summary}")
         print(f"  inputs {', '.join(r['inputs'])}; outputs {', '.join(r['outputs'])}; source: {r['source']}")
+        for name, summary in r["presets"].items():
+            print(f"  --preset {name:<10} {summary}")
     return 0
 
 
@@ -735,7 +759,7 @@ def build_parser():
     p = sub.add_parser("formats", help="show the quantisation formats (or write a config file to edit)",
                        description="Show every quantisation point with its format, the range it covers and the "
                                    "range the float analysis found; --toml prints a complete config file.")
-    p.add_argument("--filter", metavar="NAME", help=_filter_help())
+    _add_filter_args(p, variant=False)
     p.add_argument("--config", metavar="TOML", help="config to show (default: the built-in defaults)")
     p.add_argument("--toml", action="store_true",
                    help="print the config as TOML, the formats commented out (defaults that follow the parameters)")

@@ -22,7 +22,7 @@ import numpy as np
 
 from kfpga.errors import ConfigError
 from kfpga.fixed import INT64_SAFE_BITS, QFormat, bits_for, to_raw
-from kfpga.formats import MULTIPLIER_BITS, STATE_FRAC_BITS
+from kfpga.formats import MAX_OPERAND_BITS, MULTIPLIER_BITS, STATE_FRAC_BITS
 from kfpga.ops import WidthOps
 from kfpga.spec import Constant
 
@@ -43,11 +43,14 @@ def _cached_ranges(spec_name, params):
 def analysed_ranges(params, stimulus=None, *, filter=None):
     """Largest magnitude of each point of the filter of ``params`` in float runs.
 
-    ``stimulus`` (rows of ADC codes) replaces the filter's full-scale stimulus.
+    ``stimulus`` (rows of ADC codes, or ``{input: rows}``) replaces the filter's full-scale
+    stimulus.
     """
     spec = _registry().spec_for(params, filter)
     if stimulus is None:
         return dict(_cached_ranges(spec.name, params))
+    if isinstance(stimulus, dict):
+        return spec.ranges(params, {k: np.atleast_2d(np.asarray(v, dtype=np.float64)) for k, v in stimulus.items()})
     return spec.ranges(params, np.atleast_2d(np.asarray(stimulus, dtype=np.float64)))
 
 
@@ -76,14 +79,15 @@ class FilterConfig:
         Check each format against the analysed range (on by default; word-length sweeps turn
         it off to show what narrow formats do).
     max_operand_bits:
-        Widest multiplier operand allowed (18: Cyclone II's embedded multipliers).
+        Widest multiplier operand allowed (36: a product of up to 2 x 2 of Cyclone II's 18 x 18
+        embedded multipliers).
     """
 
     filter: str | None = None
     params: object = None
     formats: object = field(default_factory=dict)
     check_ranges: bool = True
-    max_operand_bits: int = MULTIPLIER_BITS
+    max_operand_bits: int = MAX_OPERAND_BITS
     #: The points whose formats were given (the rest are defaults), in datapath order.
     pinned: tuple = field(init=False, default=())
 
@@ -218,10 +222,10 @@ class FilterConfig:
                     if len(points) == 1 and next(iter(points)) in f:
                         name = next(iter(points))
                         raise ConfigError(
-                            f"formats.{name} = {f[name]} is {width} bits wide, but it feeds an embedded multiplier "
-                            f"and Cyclone II's take at most {MULTIPLIER_BITS}x{MULTIPLIER_BITS} bits")
-                    raise ConfigError(f"the product {text} has a {width}-bit operand; Cyclone II's embedded "
-                                      f"multipliers take at most {MULTIPLIER_BITS}x{MULTIPLIER_BITS} bits")
+                            f"formats.{name} = {f[name]} is {width} bits wide, but it feeds a multiplier, whose "
+                            f"operands are at most {self.max_operand_bits} bits ({_blocks(self.max_operand_bits)})")
+                    raise ConfigError(f"the product {text} has a {width}-bit operand; multiplier operands are at most "
+                                      f"{self.max_operand_bits} bits ({_blocks(self.max_operand_bits)})")
         wide = report.too_wide(INT64_SAFE_BITS)
         if wide is not None:
             points = sorted(n for n in wide.points if n in f)
@@ -312,6 +316,12 @@ class FilterConfig:
                 f'{mark}overflow = "{fmt.overflow.value}"',
             ]
         return "\n".join(lines) + "\n"
+
+
+def _blocks(bits):
+    pieces = -(-bits // MULTIPLIER_BITS)
+    return (f"one Cyclone II {MULTIPLIER_BITS}x{MULTIPLIER_BITS} embedded multiplier" if pieces == 1 else
+            f"{pieces} x {pieces} of Cyclone II's {MULTIPLIER_BITS}x{MULTIPLIER_BITS} embedded multipliers")
 
 
 def _table(data, name, source):

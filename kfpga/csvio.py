@@ -21,10 +21,18 @@ __all__ = ["InputError", "Samples", "read_samples", "read_header", "write_column
 class Samples:
     """Samples read from a CSV file."""
 
-    y: np.ndarray  # int64 ADC codes
+    codes: dict  # {column: int64 ADC codes}
     truth: np.ndarray | None  # float, when the file has a ``truth`` column
     clipped: int  # values saturated because of ``clip=True``
     path: str
+
+    @property
+    def y(self):
+        """The codes: one array for one column, else ``{column: array}`` (a filter's inputs)."""
+        return next(iter(self.codes.values())) if len(self.codes) == 1 else dict(self.codes)
+
+    def __len__(self):
+        return len(next(iter(self.codes.values())))
 
 
 def _number(text, where, column):
@@ -39,62 +47,68 @@ def _number(text, where, column):
     return value
 
 
-def read_samples(path, *, clip=False, column="y"):
-    """Read the ``y`` column (signed 16-bit ADC codes) and, if present, ``truth``.
+def read_samples(path, *, clip=False, column="y", columns=None):
+    """Read the ``y`` column (signed 16-bit ADC codes), or each of ``columns``, and ``truth`` if present.
 
     Every problem raises :class:`InputError` with the file and line: no such file, a folder,
-    bytes that are not UTF-8 (a byte-order mark is fine), no rows, no ``y`` column or two of
-    them, a blank line (every row is a sample: one output row per input row), a cell that is
-    empty, not a number, NaN, not an integer, or outside [-32768, 32767] (unless ``clip``,
+    bytes that are not UTF-8 (a byte-order mark is fine), no rows, a missing code column or one
+    named twice, a blank line (every row is a sample: one output row per input row), a cell that
+    is empty, not a number, NaN, not an integer, or outside [-32768, 32767] (unless ``clip``,
     which saturates such values and counts them).
     """
     path = Path(path)
+    wanted = list(columns) if columns is not None else [column]
     text = read_text(path, what="file")
     reader = csv.reader(io.StringIO(text, newline=""))
-    ys, truths, clipped = [], [], 0
+    codes, truths, clipped = {c: [] for c in wanted}, [], 0
     try:
         header = next(reader, None)
     except csv.Error as exc:
         raise InputError(f"{path}: not a readable CSV file ({exc})") from None
+    expected = " and ".join(repr(c) for c in wanted)
     if header is None:
-        raise InputError(f"{path}: the file is empty (expected a header line with a column named {column!r})")
+        raise InputError(f"{path}: the file is empty (expected a header line with the column(s) {expected})")
     names = [h.strip() for h in header]
-    for name in (column, "truth"):
+    for name in (*wanted, "truth"):
         if names.count(name) > 1:
             raise InputError(f"{path}: line 1: the header names column {name!r} twice")
-    if column not in names:
-        raise InputError(f"{path}: line 1: no column named {column!r} (the header has: {', '.join(names) or 'nothing'})")
-    iy = names.index(column)
+    missing = [c for c in wanted if c not in names]
+    if missing:
+        need = f"no column named {missing[0]!r}" if len(missing) == 1 else \
+            f"no columns named {' and '.join(repr(c) for c in missing)}"
+        raise InputError(f"{path}: line 1: {need} (the header has: {', '.join(names) or 'nothing'})")
+    index = {c: names.index(c) for c in wanted}
     it = names.index("truth") if "truth" in names else None
     try:
         for row in reader:
             where = f"{path}: line {reader.line_num}"
             if not any(cell.strip() for cell in row):
                 raise InputError(f"{where}: a blank line; every row is a sample (delete the line, or give it a value)")
-            if iy >= len(row) or not row[iy].strip():
-                raise InputError(f"{where}: no value in column {column!r}")
-            value = _number(row[iy], where, column)
-            if value != int(value):
-                raise InputError(f"{where}: {column} = {row[iy].strip()} is not an integer ADC code")
-            if not CODE_MIN <= value <= CODE_MAX:
-                if not clip:
-                    raise InputError(
-                        f"{where}: {column} = {row[iy].strip()} is outside the signed 16-bit range "
-                        f"[{CODE_MIN}, {CODE_MAX}] (use --clip to saturate such values)"
-                    )
-                value = min(max(value, CODE_MIN), CODE_MAX)
-                clipped += 1
-            ys.append(int(value))
+            for name, iy in index.items():
+                if iy >= len(row) or not row[iy].strip():
+                    raise InputError(f"{where}: no value in column {name!r}")
+                value = _number(row[iy], where, name)
+                if value != int(value):
+                    raise InputError(f"{where}: {name} = {row[iy].strip()} is not an integer ADC code")
+                if not CODE_MIN <= value <= CODE_MAX:
+                    if not clip:
+                        raise InputError(
+                            f"{where}: {name} = {row[iy].strip()} is outside the signed 16-bit range "
+                            f"[{CODE_MIN}, {CODE_MAX}] (use --clip to saturate such values)"
+                        )
+                    value = min(max(value, CODE_MIN), CODE_MAX)
+                    clipped += 1
+                codes[name].append(int(value))
             if it is not None:
                 if it >= len(row) or not row[it].strip():
                     raise InputError(f"{where}: no value in column 'truth'")
                 truths.append(_number(row[it], where, "truth"))
     except csv.Error as exc:
         raise InputError(f"{path}: line {reader.line_num}: not readable as CSV ({exc})") from None
-    if not ys:
+    if not codes[wanted[0]]:
         raise InputError(f"{path}: no data rows after the header")
     truth = np.array(truths, dtype=np.float64) if it is not None else None
-    return Samples(np.array(ys, dtype=np.int64), truth, clipped, str(path))
+    return Samples({c: np.array(v, dtype=np.int64) for c, v in codes.items()}, truth, clipped, str(path))
 
 
 def read_header(path):

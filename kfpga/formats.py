@@ -16,11 +16,14 @@ from __future__ import annotations
 
 from kfpga.fixed import QFormat, Rounding, bits_for
 
-__all__ = ["MULTIPLIER_BITS", "STATE_FRAC_BITS", "GUARD_BITS", "register_formats"]
+__all__ = ["MULTIPLIER_BITS", "MAX_OPERAND_BITS", "STATE_FRAC_BITS", "GUARD_BITS", "register_formats"]
 
 #: Cyclone II embedded multiplier operand width (Cyclone II Device Handbook, vol. 1, "Embedded
 #: Multipliers": 18x18 or two 9x9 per block).
 MULTIPLIER_BITS = 18
+#: Widest operand of a product: up to 2 x 2 embedded multipliers make one product (the synthesis
+#: tools split it into 18 x 18 pieces and add them; the resource report counts every piece).
+MAX_OPERAND_BITS = 2 * MULTIPLIER_BITS
 #: Default fraction bits of registers that are not multiplier operands.
 STATE_FRAC_BITS = 8
 GUARD_BITS = 1

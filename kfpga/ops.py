@@ -383,6 +383,20 @@ class WidthReport:
     def multiplier_count(self):
         return len(self.multipliers)
 
+    def blocks(self, bits=18):
+        """Embedded ``bits`` x ``bits`` multipliers the products take (a wider operand takes
+        ``ceil(width / bits)`` pieces), one per product."""
+        return sum(-(-wa // bits) * -(-wb // bits) for _, wa, wb, _, _ in self.multipliers)
+
+    def widest_product_blocks(self, bits=18):
+        """Embedded multipliers of one multiplier shared by every product (both operands as wide
+        as the widest that it takes)."""
+        if not self.multipliers:
+            return 0
+        wa = max(max(a, b) for _, a, b, _, _ in self.multipliers)
+        wb = max(min(a, b) for _, a, b, _, _ in self.multipliers)
+        return -(-wa // bits) * -(-wb // bits)
+
     def widest(self):
         return max(self.intermediates, key=lambda i: i.width, default=None)
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import importlib
 
-__all__ = ["FILTERS", "DEFAULT", "get", "names", "specs", "spec_for", "register"]
+__all__ = ["FILTERS", "DEFAULT", "get", "names", "specs", "spec_for", "register", "presets", "preset"]
 
 #: ``name -> module`` whose ``SPEC`` is the filter's :class:`~kfpga.spec.FilterSpec`; imported on use.
 FILTERS = {
@@ -58,3 +58,23 @@ def spec_for(params, filter=None):
         if type(params) is spec.params:
             return spec
     raise TypeError(f"params must be the parameters of a registered filter ({', '.join(names())}), not {params!r}")
+
+
+def presets():
+    """``{preset: (filter, summary)}`` over every registered filter, in registry order."""
+    out = {}
+    for spec in specs():
+        for name, (summary, _) in spec.presets.items():
+            if name in out:
+                raise ValueError(f"preset {name!r} is defined by both the {out[name][0]} and the {spec.name} filter")
+            out[name] = (spec.name, summary)
+    return out
+
+
+def preset(name):
+    """``(filter, params)`` of the preset ``name``; ``KeyError`` with the known names."""
+    known = presets()
+    if name not in known:
+        raise KeyError(f"no preset named {name!r}; presets: {', '.join(known)}")
+    filter_name = known[name][0]
+    return filter_name, get(filter_name).presets[name][1]()

@@ -157,6 +157,10 @@ class FilterSpec:
         else ``{input: array}``); ``None`` uses ``kfpga/scenarios.py`` on one input.
     presets:
         ``{name: (summary, params factory)}``: named models, ``--preset NAME``.
+    measured:
+        ``measured(params) -> input name | None``: the input that observes the default output
+        itself, whose error is the "raw" RMSE of ``compare``; ``None`` (the default) takes the
+        only input of a one-input filter.
     """
 
     name: str
@@ -178,6 +182,7 @@ class FilterSpec:
     random_params: Callable
     scenario: Callable | None = None
     presets: Mapping = field(default_factory=dict)
+    measured: Callable | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "points", MappingProxyType(dict(self.points)))
@@ -195,12 +200,20 @@ class FilterSpec:
         """The output fields of a model with these parameters."""
         return tuple(self.outputs(params) if callable(self.outputs) else self.outputs)
 
+    def measured_input(self, params):
+        """The input that observes the default output directly, or ``None``."""
+        if self.measured is not None:
+            return self.measured(params)
+        names = self.inputs_for(params)
+        return names[0][0] if len(names) == 1 else None
+
     @property
     def default_variant(self):
         return next(iter(self.variants))
 
 
-    def make_core(self, config, variant, *, channels=1):
-        """The Amaranth core of ``variant`` (imports the RTL module on first use)."""
+    def make_core(self, config, variant, *, channels=1, **options):
+        """The Amaranth core of ``variant`` (imports the RTL module on first use); ``options``
+        go to the filter's core (``stages=L`` for a steady-state loop)."""
         module, _, function = self.core.partition(":")
-        return getattr(importlib.import_module(module), function)(config, variant, channels=channels)
+        return getattr(importlib.import_module(module), function)(config, variant, channels=channels, **options)

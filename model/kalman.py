@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kfpga.errors import ConfigError
+from kfpga.fixed import QFormat
 from kfpga.formats import register_formats
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
 from kfpga.params import matrix, number
@@ -495,8 +496,9 @@ def _steady_applies(params):
         return None
     try:
         _check_pbh(params)
-    except PBHError as exc:
-        return f"model: {exc}"
+    except PBHError as exc:  # name the matrices to change: H to observe a mode, G or Q to drive it
+        where = "model.H" if str(exc).startswith("(F, H)") else "model.G, model.Q"
+        return f"{where}: {exc}"
     return None
 
 
@@ -582,6 +584,14 @@ def _outputs_for(params):
     return tuple(out)
 
 
+def _measured(params):
+    """The observation of the default output x1 itself (its H row picks x1 alone), if any."""
+    for j, row in enumerate(params.H):
+        if row[0] == 1.0 and not any(row[1:]):
+            return params.observations[j]
+    return None
+
+
 def _stimulus(params):
     """Full-scale stimulus for every observation: the same rows, each observation's phase moved."""
     base = full_scale_stimulus(float(np.max(np.diag(params.R))))
@@ -596,6 +606,16 @@ def _ranges(params, stimulus=None):
 
 def _default_formats(params, ranges, *, operand_bits, state_frac):
     formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac)
+    # the innovation's step must be small against the observation noise it carries into every
+    # state (at most a quarter of its standard deviation), else the rounding of e, not the
+    # noise, sets the error (R = 0.01: 0.1 codes); beyond the multiplier width it takes a
+    # second multiplier block per product, and more fraction bits than y - yhat has are useless
+    for j in range(params.m):
+        e = formats[f"e{j + 1}"]
+        need = math.ceil(math.log2(4.0 / math.sqrt(params.R[j][j]))) if params.R[j][j] < 16.0 else 0
+        want = min(max(e.frac_bits, need), max(e.frac_bits, state_frac))
+        if want > e.frac_bits:
+            formats[f"e{j + 1}"] = QFormat(e.int_bits, want, e.rounding, e.overflow)
     # a predicted observation that is one predicted state (H selects it) keeps that state's format:
     # then it is no extra logic
     for j, row in enumerate(params.H):
@@ -631,12 +651,14 @@ def _goals(config, variant, channels=1):
     """Logic cells per state and observation; every multiplier the model needs; 75 MHz."""
     params = config.params
     n, m = params.n, params.m
-    extra = sum(1 for row in params.F for v in row if not free(v))
+    # every product of the update on its own embedded multipliers (steady), or all on one (full);
+    # an operand wider than 18 bits (an innovation with many fraction bits) takes more pieces
+    report = config.width_report(variant)
     if variant == "steady":
-        return {"logic_cells": 250 * n + 150 * m + 150 * n * (channels - 1), "mul18": n * m + extra, "lut_levels": 16,
-                "worst_path_ns": round(1000.0 / 75.0, 2)}
-    return {"logic_cells": 900 * n + 300 * n * (channels - 1), "mul18": 4, "lut_levels": 16,
-            "worst_path_ns": round(1000.0 / 75.0, 2)}
+        return {"logic_cells": 250 * n + 150 * m + 150 * n * (channels - 1), "mul18": report.blocks(),
+                "lut_levels": 16, "worst_path_ns": round(1000.0 / 75.0, 2)}
+    return {"logic_cells": 900 * n + 300 * n * (channels - 1), "mul18": report.widest_product_blocks(),
+            "lut_levels": 16, "worst_path_ns": round(1000.0 / 75.0, 2)}
 
 
 def _random_params(rng):
@@ -699,7 +721,7 @@ def _preset_ca3():
     return StateSpaceParams(F=((1.0, t, t * t / 2), (0.0, 1.0, t), (0.0, 0.0, 1.0)), G=((1.0, 0.0, 0.0), (0.0, 1.0, 0.0),
                             (0.0, 0.0, 1.0)), Q=((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), H=((1.0, 0.0, 0.0),),
                             R=((0.01,),), P0=((10.0, 0.0, 0.0), (0.0, 10.0, 0.0), (0.0, 0.0, 10.0)), x0=(0.0, 0.0, 0.0),
-                            T=t, observations=("roll",))
+                            T=t)
 
 
 def _preset_va2():
@@ -745,4 +767,5 @@ SPEC = FilterSpec(
     random_params=_random_params,
     scenario=_scenario,
     presets=PRESETS,
+    measured=_measured,
 )

@@ -322,4 +322,5 @@ SPEC = FilterSpec(
     goals=_goals,
     default_output="x1",
     random_params=_random_params,
+    presets={"cv2": ("the paper's constant-velocity filter (seeds/001): T = 1, Q = 2, R = 4, P0 = 10 I", KalmanParams)},
 )

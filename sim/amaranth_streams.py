@@ -75,7 +75,10 @@ def run_stream(dut, payloads, *, seed, p_idle=0.0, p_ready=1.0, extra_cycles=0, 
     done = []
     sim = Simulator(dut)
     sim.add_clock(CLOCK_PERIOD_S)
-    budget = max_cycles if max_cycles is not None else 200 * len(payloads) + 1000
+    # the deadline: ten times what the core needs at the offered rates, so a hang fails
+    per_update = getattr(dut, "cycles_per_update", 18) + 2
+    rate = max((1 - p_idle) * p_ready, 0.05)
+    budget = max_cycles if max_cycles is not None else int(10 * per_update * len(payloads) / rate) + 1000
 
     async def producer(ctx):
         await drive(ctx, dut.i, payloads, rng_in, p_idle)
@@ -105,24 +108,28 @@ def run_stream(dut, payloads, *, seed, p_idle=0.0, p_ready=1.0, extra_cycles=0, 
     return results
 
 
-def run_core(config, variant, y, *, seed, channels=1, p_idle=0.0, p_ready=1.0):
+def run_core(config, variant, y, *, seed, channels=1, p_idle=0.0, p_ready=1.0, options=None):
     """Run codes ``y`` (random channels when ``channels > 1``) through the filter's core, and check
-    every output field against the model with the :class:`Scoreboard`.
+    every output field against the model with the :class:`Scoreboard`. ``y`` is an array, or
+    ``{input: array}`` for a filter with several inputs; ``options`` go to the core.
 
     Returns the scoreboard's report, with ``got`` (each field's integers) and ``overflowed``.
     """
     rng = np.random.default_rng(seed)
-    ch = rng.integers(0, channels, len(y)) if channels > 1 else np.zeros(len(y), dtype=np.int64)
+    names = config.inputs
+    columns = {k: np.asarray(v) for k, v in y.items()} if isinstance(y, dict) else {names[0]: np.asarray(y)}
+    count = len(columns[names[0]])
+    ch = rng.integers(0, channels, count) if channels > 1 else np.zeros(count, dtype=np.int64)
     spec = config.spec
-    dut = spec.make_core(config, variant, channels=channels)
-    name = config.inputs[0]
-    payloads = [{"channel": int(c), name: int(s)} for c, s in zip(ch, y, strict=True)]
+    dut = spec.make_core(config, variant, channels=channels, **(options or {}))
+    samples = [{name: int(columns[name][i]) for name in names} for i in range(count)]
+    payloads = [{"channel": int(c), **s} for c, s in zip(ch, samples, strict=True)]
     out = run_stream(dut, payloads, seed=seed, p_idle=p_idle, p_ready=p_ready, extra_cycles=50)
     board = Scoreboard(config, variant)
     fields = ("channel", *config.output_names, "overflow")
     got = {f: np.array([int(getattr(o, f)) for o in out]) for f in fields}
-    for c, s in zip(ch, y, strict=True):
-        board.add_input(c, int(s))
+    for c, s in zip(ch, samples, strict=True):
+        board.add_input(c, s)
     for i in range(len(out)):
         board.add_output(**{f: got[f][i] for f in fields})
     report = board.assert_ok()

@@ -31,15 +31,21 @@ async def core_bit_exact(dut):
     await tb.reset()
     start_ns = get_sim_time("ns")
     t0 = time.perf_counter()
-    name = tb.config.inputs[0]
-    words = [{"channel": int(c), name: int(v)} for c, v in zip(channels, codes, strict=True)]
-    await with_timeout(pump(dut.clk, tb.source, tb.sink, words), 100 * n * 25 + 1000, "ns")
+    # one stress signal per input (a model with two observations gets two different ones)
+    names = tb.config.inputs
+    columns = {name: codes if j == 0 else stress_codes(p["seed"] + 7 * j, n) for j, name in enumerate(names)}
+    words = [{"channel": int(c), **{name: int(columns[name][i]) for name in names}} for i, c in enumerate(channels)]
+    # the deadline: ten times the cycles the core needs at the offered rates, so a hang fails
+    per_update = tb.config.spec.make_core(tb.config, p["variant"], channels=count).cycles_per_update
+    rate = (1 - float(p.get("p_idle", 0.0))) * float(p.get("p_ready", 1.0))
+    await with_timeout(pump(dut.clk, tb.source, tb.sink, words), int(10 * n * (per_update + 2) / rate + 1000) * 20,
+                       "ns")
     wall = time.perf_counter() - t0
     cycles = (get_sim_time("ns") - start_ns) / 20
     await ClockCycles(dut.clk, 40)
     extra = int(dut.o__valid.value)  # a further estimate waiting would be one too many
-    for c, v in zip(channels, codes, strict=True):
-        tb.scoreboard.add_input(c, v)
+    for i, c in enumerate(channels):
+        tb.scoreboard.add_input(c, {name: int(columns[name][i]) for name in names})
     for word in tb.sink.words:
         tb.scoreboard.add_output(**word)
     report = tb.scoreboard.check()

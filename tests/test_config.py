@@ -93,9 +93,13 @@ def test_product_too_wide_is_rejected():
 
 def test_operand_wider_than_a_multiplier_is_rejected():
     with pytest.raises(ConfigError, match=exactly(
-            "formats.e = Q17.4 is 21 bits wide, but it feeds an embedded multiplier and Cyclone II's take at "
-            "most 18x18 bits")):
-        KalmanConfig(formats={"e": QFormat(17, 4)})
+            "formats.e = Q17.20 is 37 bits wide, but it feeds a multiplier, whose operands are at most 36 bits "
+            "(2 x 2 of Cyclone II's 18x18 embedded multipliers)")):
+        KalmanConfig(formats={"e": QFormat(17, 20)}, check_ranges=False)
+    with pytest.raises(ConfigError, match=exactly(
+            "formats.e = Q17.4 is 21 bits wide, but it feeds a multiplier, whose operands are at most 18 bits "
+            "(one Cyclone II 18x18 embedded multiplier)")):
+        KalmanConfig(formats={"e": QFormat(17, 4)}, max_operand_bits=18)
 
 
 def test_r_too_small_for_its_format():

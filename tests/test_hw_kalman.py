@@ -1,0 +1,134 @@
+# amaranth: UnusedElaboratable=no
+"""The general state-space filter's cores on the presets and on random models.
+
+The contract suite runs the registry's default model (the paper's matrices); here the presets
+of the source documents (three states, two observations) and random models with 1..4 states
+go through the same checks: RTL equal to the model in the Amaranth simulator with
+backpressure, the declared latency and cycles per update measured, the cycle budget of the
+time-varying core, and cocotb on the generated Verilog on both simulators.
+"""
+
+import os
+
+import numpy as np
+import pytest
+
+from kfpga import registry
+from kfpga.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.config import ConfigError, FilterConfig
+from kfpga.hw.kalman import FullCore, SteadyCore, default_stages
+from kfpga.model.kalman import SPEC
+from kfpga.sim.amaranth_streams import measure_timing, run_core
+from kfpga.sim.runner import SIMULATORS, build, run
+from kfpga.tools import simulator_available
+
+PRESET_CASES = [("ca3", "steady"), ("ca3", "full"), ("va2", "steady")]
+
+
+def preset_config(name):
+    filter_name, params = registry.preset(name)
+    return FilterConfig(filter=filter_name, params=params)
+
+
+def codes(rng, n):
+    y = np.cumsum(rng.normal(0, 250, n)) + rng.normal(0, 30, n)
+    y[n // 4: n // 4 + 15] = CODE_MAX
+    y[n // 2: n // 2 + 15] = CODE_MIN
+    return np.clip(np.round(y), CODE_MIN, CODE_MAX).astype(np.int64)
+
+
+def stimulus(config, rng, n):
+    names = config.inputs
+    return codes(rng, n) if len(names) == 1 else {name: codes(rng, n) for name in names}
+
+
+@pytest.mark.parametrize(("preset", "variant"), PRESET_CASES)
+@pytest.mark.parametrize("channels", [1, 3])
+def test_preset_rtl_equals_model_with_backpressure(preset, variant, channels, seed):
+    config = preset_config(preset)
+    rng = np.random.default_rng(seed)
+    n = 400 if variant == "full" else 1200
+    report = run_core(config, variant, stimulus(config, rng, n), seed=seed, channels=channels, p_idle=0.3,
+                      p_ready=0.5)
+    assert report["compared"] == n and report["extra"] == 0
+
+
+def test_random_models_rtl_equals_model(seed):
+    """Random models with 1..4 states and 1..2 observations, both variants where they apply."""
+    rng = np.random.default_rng(seed)
+    done = 0
+    for _ in range(8):
+        params = SPEC.random_params(rng)
+        for variant in SPEC.variants:
+            try:
+                config = FilterConfig(filter="kalman", params=params)
+                config.require_variant(variant)
+            except ConfigError:
+                continue
+            if variant == "full" and params.m == 2:
+                continue  # model-only
+            n = 150 if variant == "full" else 400
+            report = run_core(config, variant, stimulus(config, rng, n), seed=seed, channels=2, p_idle=0.2,
+                              p_ready=0.7)
+            assert report["compared"] == n and report["extra"] == 0, params
+            done += 1
+    assert done >= 8
+
+
+@pytest.mark.parametrize(("preset", "variant"), PRESET_CASES)
+def test_preset_latency_and_cycles_per_update_are_measured(preset, variant):
+    config = preset_config(preset)
+    dut = config.spec.make_core(config, variant)
+    latency, accepted, produced = measure_timing(dut, config)
+    assert latency == dut.latency
+    assert accepted[2:7] == [dut.cycles_per_update] * 5
+    assert produced[:5] == [dut.cycles_per_update] * 5
+
+
+def test_time_varying_core_takes_at_most_200_cycles_for_three_states():
+    """Issue budget: <= 200 cycles per update at 50 MHz for n = 3 (ca3: 250 kupdates/s)."""
+    dut = FullCore(preset_config("ca3"))
+    assert dut.cycles_per_update <= 200
+
+
+def test_two_observations_are_model_only_for_the_time_varying_core():
+    with pytest.raises(ValueError, match="two observations are model-only"):
+        FullCore(preset_config("va2"))
+
+
+def test_steady_loop_stages():
+    """Three-term rows of F (ca3) get a stage for their sum and one for its rounding."""
+    ca3, cv2 = preset_config("ca3"), FilterConfig(filter="kalman")
+    assert default_stages(ca3.params) == 5 and default_stages(cv2.params) == 4
+    assert SteadyCore(ca3).cycles_per_update == 5
+    for stages in range(1, 6):
+        assert SteadyCore(ca3, stages=stages).cycles_per_update == stages
+    with pytest.raises(ValueError, match="stages must be one of 1, 2, 3, 4, 5, not 6"):
+        SteadyCore(ca3, stages=6)
+
+
+@pytest.mark.parametrize("stages", [1, 2, 3])
+def test_fewer_stages_are_bit_exact_too(stages, seed):
+    config = preset_config("ca3")
+    rng = np.random.default_rng(seed)
+    report = run_core(config, "steady", codes(rng, 500), seed=seed, channels=2, p_idle=0.2, p_ready=0.6,
+                      options={"stages": stages})
+    assert report["compared"] == 500
+
+
+@pytest.mark.cosim
+@pytest.mark.parametrize("simulator", SIMULATORS)
+@pytest.mark.parametrize(("preset", "variant"), PRESET_CASES)
+def test_preset_cosimulation_is_bit_exact(preset, variant, simulator, seed):
+    ok, why = simulator_available(simulator)
+    if not ok:
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"CI must run both simulators: {why}")
+        pytest.skip(why)
+    config = preset_config(preset)
+    samples = 400 if variant == "full" else 1500
+    result = run(build(simulator, "core", config=config, variant=variant, channels=3), "test_core",
+                 params={"variant": variant, "seed": seed, "samples": samples, "channels": 3, "p_idle": 0.2,
+                         "p_ready": 0.7, "config_toml": config.to_toml()}, tag=f"preset-{preset}-{variant}")
+    assert result["mismatches"] == 0 and result["ok"], result.get("first_mismatches")
+    assert result["samples"] == samples
