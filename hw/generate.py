@@ -63,7 +63,7 @@ def write_lint_waivers(out_dir, file_glob):
     return path
 
 
-def write_top(out_dir, config, *, variant=None, six_channel=False, channel=0, ratio=10, timeout_periods=40,
+def write_top(out_dir, config, *, variant=None, six_channel=False, channel=None, ratio=10, timeout_periods=40,
               out_field=None):
     """Write ``kfpga_top.v`` (and the lint waivers) into ``out_dir``; returns ``(verilog path, top)``."""
     out_dir = Path(out_dir)

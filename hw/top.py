@@ -1,6 +1,6 @@
 """Top level: clock divider + ADS8364 controller + a registered filter's core + output port."""
 
-from amaranth import ClockDomain, ClockSignal, Module, signed
+from amaranth import ClockDomain, ClockSignal, Module, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.cdc import ResetSynchronizer
 from amaranth.lib.wiring import In, Out
@@ -124,9 +124,12 @@ class FilterSystem(wiring.Component):
     variant:
         Which of the filter's cores (default: its first variant).
     six_channel:
-        Sample and filter all six channels (one HOLD for all); else only ``channel``.
+        Sample and filter all six channels (one HOLD for all), each with its own state; a
+        one-input filter only.
     channel:
-        The channel of single-channel mode, 0..5.
+        The channel of single-channel mode, 0..5 (default: the model's ``adc``, else 0). A
+        filter with several inputs (two observations) reads the model's ADC channels instead,
+        all sampled at the same instant, and makes one update of the samples of one conversion.
     ratio:
         System clock / ADC clock (10: 50 MHz -> 5 MHz).
     timeout_periods:
@@ -139,19 +142,28 @@ class FilterSystem(wiring.Component):
     See :data:`PORTS`; ``out_data`` is as wide as the chosen field's format.
     """
 
-    def __init__(self, config, *, variant=None, six_channel=False, channel=0, ratio=10, timeout_periods=40,
+    def __init__(self, config, *, variant=None, six_channel=False, channel=None, ratio=10, timeout_periods=40,
                  out_field=None):
         spec = config.spec
-        if len(config.inputs) != 1:
-            raise ValueError(f"the {spec.name} filter takes {len(config.inputs)} samples per update; the board top "
-                             "feeds one ADC channel per update")
+        self.six_channel = bool(six_channel)
+        if self.six_channel:
+            if len(config.inputs) != 1:
+                raise ValueError(f"six channels of their own need a one-input filter; this model reads "
+                                 f"{len(config.inputs)} ADC channels per update")
+            if spec.adc is not None and spec.adc(config.params) is not None:
+                raise ValueError("six channels filter every ADC channel: the model's adc does not apply")
+            if channel is not None:
+                raise ValueError("six channels filter every ADC channel: channel does not apply")
+            self.adc = (0,)
+        else:
+            self.adc = spec.adc_channels(config.params, channel)
         self.config = config
         self.variant = spec.default_variant if variant is None else variant
-        self.six_channel = bool(six_channel)
-        self.channel = channel
+        self.channel = self.adc[0]  # the channel reported on out_channel in single-channel mode
         self.ratio = ratio
         self.out_field = globals()["out_field"](config, out_field)
-        self.frontend = AdcFrontend(six_channel=six_channel, channel=channel, ratio=ratio,
+        # several inputs: all six are converted at one instant and read; the update takes its own
+        self.frontend = AdcFrontend(six_channel=six_channel or len(self.adc) > 1, channel=self.channel, ratio=ratio,
                                     timeout_periods=timeout_periods)
         self.core = spec.make_core(config, self.variant, channels=6 if six_channel else 1)
         super().__init__(_pin_members(PORTS, out_width(config, self.out_field)))
@@ -171,12 +183,30 @@ class FilterSystem(wiring.Component):
             else:
                 m.d.comb += pin.eq(inner)
         # the controller's (ADC channel, sample) words feed the core's (channel state, y) input
-        sample_name = self.config.inputs[0]
-        m.d.comb += [
-            core.i.valid.eq(frontend.o.valid),
-            frontend.o.ready.eq(core.i.ready),
-            getattr(core.i.payload, sample_name).eq(frontend.o.payload.sample),
-        ]
+        names = self.config.inputs
+        if len(names) == 1:
+            m.d.comb += [
+                core.i.valid.eq(frontend.o.valid),
+                frontend.o.ready.eq(core.i.ready),
+                getattr(core.i.payload, names[0]).eq(frontend.o.payload.sample),
+            ]
+        else:
+            # the words of one conversion come in channel order: the inputs' samples are held
+            # until the last of their channels comes, which then goes to the core with them
+            order = sorted(range(len(names)), key=lambda j: self.adc[j])
+            last = order[-1]
+            held = {}
+            for j in order[:-1]:
+                held[j] = Signal(signed(16), name=f"held_{names[j]}")
+                with m.If(frontend.o.valid & (frontend.o.payload.channel == self.adc[j])):
+                    m.d.sync += held[j].eq(frontend.o.payload.sample)
+            is_last = frontend.o.payload.channel == self.adc[last]
+            m.d.comb += [
+                core.i.valid.eq(frontend.o.valid & is_last),
+                frontend.o.ready.eq(~is_last | core.i.ready),
+                getattr(core.i.payload, names[last]).eq(frontend.o.payload.sample),
+                *(getattr(core.i.payload, names[j]).eq(held[j]) for j in held),
+            ]
         if self.six_channel:  # the ADC's channel number is the core's channel state
             m.d.comb += core.i.payload.channel.eq(frontend.o.payload.channel)
         # the output port has no backpressure: each estimate is presented for one cycle

@@ -253,9 +253,10 @@ def _run_compare(args):
     field = m["field"]
     print(f"kfpga compare: {config.filter} filter, {args.variant} variant, {label}, {m['samples']} samples"
           + (f", seed {m['seed']}" if m["seed"] is not None else ""))
-    if m["rmse_raw"] is not None:
+    if m["rmse_float"] is not None:
         print(f"  RMSE of {field} vs truth (after {m['settle']} settling samples):")
-        print(f"    raw input    {m['rmse_raw']:10.4f} codes")
+        if m["rmse_raw"] is not None:
+            print(f"    raw input    {m['rmse_raw']:10.4f} codes  ({m['measured_input']})")
         print(f"    float model  {m['rmse_float']:10.4f} codes")
         print(f"    fixed model  {m['rmse_fixed']:10.4f} codes  ({100 * (m['rmse_fixed_over_float'] - 1):+.3f} % vs float)")
     print("  fixed vs float             max |fixed - float|            SQNR")
@@ -404,14 +405,34 @@ def _adc_channel(text):
     return value
 
 
-def _check_channel(args):
-    """``--channel`` names the one channel of ``--channels 1``; with six it would be ignored."""
+def _check_channel(args, config=None):
+    """``--channel`` names the one channel of ``--channels 1``; with six it would be ignored, and
+    a model that names its ADC channels (``model.adc``, or two observations) must agree.
+
+    Sets ``args.adc`` to the ADC channel of each input (``None`` with six channels).
+    """
     if args.channel is not None and args.channels == 6:
         _not_with(args, "--channel", "--channels 6", "all six channels are sampled and filtered")
-    args.channel = 0 if args.channel is None else args.channel
+    args.adc = None
+    if config is None:
+        return
+    spec = config.spec
+    if args.channels == 6:
+        if len(config.inputs) > 1:
+            raise UsageError(f"--channels 6 filters six channels of one input each; this model reads {len(config.inputs)} "
+                             f"ADC channels per update ({', '.join(config.inputs)}): use --channels 1")
+        if spec.adc is not None and spec.adc(config.params) is not None:
+            raise UsageError("--channels 6 filters every ADC channel, so the model's adc would be ignored: remove "
+                             "adc from [model], or use --channels 1")
+        return
+    try:
+        args.adc = spec.adc_channels(config.params, args.channel)
+    except ValueError as exc:
+        raise UsageError(f"--channel: {exc}") from None
 
 
 def _run_generate(args):
+    from kfpga.ads8364 import CHANNELS
     from kfpga.hw.generate import TOP_NAME
     from kfpga.hw.top import out_field
     from kfpga.paths import check_output_dir
@@ -421,6 +442,7 @@ def _run_generate(args):
     check_output_dir(args.out, option="--out")
     _check_channel(args)
     config = _load_config(args)
+    _check_channel(args, config)
     if args.ratio < 2:
         raise UsageError(f"--ratio must be >= 2, not {args.ratio}")
     try:
@@ -431,7 +453,9 @@ def _run_generate(args):
                              channel=args.channel, ratio=args.ratio, pins=args.pins, out_field=field)
     path = Path(args.out) / f"{TOP_NAME}.v"
     print(f"wrote {args.out}/: {', '.join(manifest['files'])}")
-    print(f"  {config.filter} filter, {args.variant} core, {args.channels} channel(s), {field} "
+    where = "six channels" if args.channels == 6 else ", ".join(
+        f"{CHANNELS[c]}" + (f" ({n})" if len(args.adc) > 1 else "") for n, c in zip(config.inputs, args.adc, strict=True))
+    print(f"  {config.filter} filter, {args.variant} core, ADC {where}, {field} "
           f"{manifest['out_data']['format']} on out_data, "
           f"latency {manifest['core']['latency_cycles']} cycles, {manifest['core']['cycles_per_update']} cycle(s) "
           f"per update; compile with: cd {args.out} && quartus_sh --flow compile {TOP_NAME}")
@@ -578,6 +602,7 @@ def _run_simulate(args):
 
     _check_channel(args)
     config = _load_config(args)
+    _check_channel(args, config)
     ok, why = simulator_available(args.simulator)
     if not ok:
         raise UsageError(f"{args.simulator} is not available: {why}")
@@ -602,7 +627,8 @@ def _run_simulate(args):
         args.seed = _pick_seed(args.seed)
         _info(f"seed {args.seed} (replay with --seed {args.seed})")
     six = args.channels == 6
-    params = {"variant": args.variant, "six": six, "channel": args.channel, "samples": args.samples,
+    params = {"variant": args.variant, "six": six, "channel": args.adc[0] if args.adc else None,
+              "adc": list(args.adc) if args.adc else None, "samples": args.samples,
               "seed": args.seed, "scenario": args.scenario, "csv": str(Path(args.input).resolve()) if args.input else None,
               "config_toml": config.to_toml()}
     t0 = time.perf_counter()
@@ -654,7 +680,9 @@ def _run_simulate(args):
     if args.json:
         _emit_json(summary)
     else:
-        where = "all six channels" if six else f"channel {CHANNELS[args.channel]}"
+        where = "all six channels" if six else (f"channel {CHANNELS[args.adc[0]]}" if len(args.adc) == 1 else
+                                                 "channels " + ", ".join(f"{CHANNELS[c]} ({n})" for n, c in
+                                                                         zip(config.inputs, args.adc, strict=True)))
         print(f"kfpga simulate: {config.filter} filter, {args.variant} core, {where}, {args.simulator}, seed {args.seed}")
         verdict = "bit-exact" if summary["mismatches"] == 0 else "MISMATCHES"
         print(f"  estimates compared      {summary['samples']}   mismatches {summary['mismatches']} ({verdict})")
@@ -662,7 +690,8 @@ def _run_simulate(args):
             print(f"  hardware vs float       max |hw - float| {summary['max_abs_hw_minus_float_lsb']:.1f} LSB "
                   f"({summary['max_abs_hw_minus_float']:.4g} codes), SQNR {summary['sqnr_db']:.1f} dB")
         if summary["rmse_hw"] is not None:
-            print(f"  RMSE vs truth           raw {summary['rmse_raw']:.4f}, float {summary['rmse_float']:.4f}, "
+            raw = "-" if summary["rmse_raw"] is None else f"{summary['rmse_raw']:.4f}"
+            print(f"  RMSE vs truth           raw {raw}, float {summary['rmse_float']:.4f}, "
                   f"hardware {summary['rmse_hw']:.4f} codes")
         print(f"  ADC conversions {summary['conversions']}, timeout flag {summary['timeout_flag']}, "
               f"overflow flag {summary['overflow_flag']}, {summary['sim_time_us'] / 1000:.1f} ms simulated")

@@ -96,6 +96,29 @@ def load_pins(path=None):
     return rows
 
 
+#: User I/O pins the built-in table keeps free for a wider ``out_data`` (bits 26 and up, in this
+#: order): pins that Quartus II 13.0sp1 placed as 3.3-V LVTTL user I/O in a fit of the
+#: EP2C20Q240C8 (its "Design Ports Information" table), none used by ``constraints/pins.csv``.
+SPARE_OUT_PINS = (200, 232, 222, 230, 192, 237, 216, 236, 184, 195)
+#: ``out_data`` bits the built-in table itself has rows for.
+BUILTIN_OUT_BITS = 26
+
+
+def board_rows(config, out_field=None, pins=None):
+    """``(rows, label)`` of the pin table for this design: the file ``pins`` as it is, or the
+    built-in table with ``out_data`` fitted to the field's width (rows beyond it dropped,
+    :data:`SPARE_OUT_PINS` for bits past :data:`BUILTIN_OUT_BITS`)."""
+    if pins is not None:
+        return load_pins(pins), str(pins)
+    width = out_width(config, out_field)
+    rows = [r for r in load_pins() if r.port != "out_data" or r.bit < width]
+    spare = list(SPARE_OUT_PINS)
+    for bit in range(BUILTIN_OUT_BITS, min(width, BUILTIN_OUT_BITS + len(spare))):
+        rows.append(PinRow("out_data", bit, f"PIN_{spare[bit - BUILTIN_OUT_BITS]}", "3.3-V LVTTL",
+                           "spare user I/O of the built-in table", 0))
+    return rows, "constraints/pins.csv"
+
+
 def port_bits(config, out_field=None):
     """Every top-level port bit as ``(port, bit)`` (``bit`` None for 1-bit ports).
 
@@ -139,7 +162,7 @@ def pin_table(config, *, out_field=None, base=None):
     does not have (their pins are the user's to choose, as only the board says which are free),
     a narrower one drops rows.
     """
-    rows = load_pins(base)
+    rows, _ = board_rows(config, out_field, base)
     by_bit = {(r.port, r.bit): r for r in rows}
     lines = [
         f"# Pin table of {TOP_NAME} on the {DEVICE_ORDERING} for the {config.filter} filter, out_data = "
@@ -191,13 +214,13 @@ def io_timing(ratio=10):
     }
 
 
-def write_project(out_dir, config, *, variant=None, six_channel=False, channel=0, ratio=10, pins=None, out_field=None):
+def write_project(out_dir, config, *, variant=None, six_channel=False, channel=None, ratio=10, pins=None,
+                  out_field=None):
     """Write the Verilog and a complete Quartus II project into ``out_dir``; returns the manifest."""
     out_dir = Path(out_dir)
     variant = config.spec.default_variant if variant is None else variant
     out_field = top_out_field(config, out_field)
-    rows = load_pins(pins)
-    label = "constraints/pins.csv" if pins is None else str(pins)
+    rows, label = board_rows(config, out_field, pins)
     assigned = check_pins(rows, config, label, out_field)
     values = _sdc_values(ratio)
     verilog, top = write_top(out_dir, config, variant=variant, six_channel=six_channel, channel=channel, ratio=ratio,
@@ -231,7 +254,9 @@ def write_project(out_dir, config, *, variant=None, six_channel=False, channel=0
         "generator": {"kfpga": __version__, "amaranth": importlib.metadata.version("amaranth")},
         "top": TOP_NAME, "family": FAMILY, "device": DEVICE, "device_ordering_code": DEVICE_ORDERING,
         "filter": config.filter, "variant": variant, "channels": 6 if six_channel else 1,
-        "channel": None if six_channel else CHANNELS[channel],
+        "channel": None if six_channel else CHANNELS[top.channel],
+        "adc_channels": None if six_channel else {name: CHANNELS[c] for name, c in zip(config.inputs, top.adc,
+                                                                                      strict=True)},
         "out_data": {"field": out_field, "format": str(config.output_format(out_field)),
                      "width": data_bits},
         "clocks": {"system_mhz": SYSTEM_MHZ, "adc_mhz": float(values["adc_mhz"]), "ratio": ratio},
@@ -251,7 +276,7 @@ def write_project(out_dir, config, *, variant=None, six_channel=False, channel=0
                                     "format": str(config.formats[c.point] if isinstance(c.point, str) else c.point)}
                              for name, c in config.constants(variant).items() if isinstance(c, Constant)}
     (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
-    (out_dir / "README.txt").write_text(_readme(variant, six_channel, channel, ratio, manifest))
+    (out_dir / "README.txt").write_text(_readme(variant, six_channel, ratio, manifest))
     return manifest
 
 
@@ -263,8 +288,11 @@ def _jsonable(value):
     return value
 
 
-def _readme(variant, six_channel, channel, ratio, manifest):
-    where = "all six channels" if six_channel else f"channel {CHANNELS[channel]}"
+def _readme(variant, six_channel, ratio, manifest):
+    adc = manifest["adc_channels"]
+    where = "all six channels" if six_channel else (
+        f"channel {manifest['channel']}" if len(adc) == 1 else
+        "channels " + ", ".join(f"{c} ({name})" for name, c in adc.items()) + ", one update per conversion")
     out = manifest["out_data"]
     return f"""kfpga {__version__}: Quartus II 13.0sp1 project for the {DEVICE_ORDERING} (Cyclone II)
 

@@ -161,6 +161,9 @@ class FilterSpec:
         ``measured(params) -> input name | None``: the input that observes the default output
         itself, whose error is the "raw" RMSE of ``compare``; ``None`` (the default) takes the
         only input of a one-input filter.
+    adc:
+        ``adc(params) -> (channel per input) | None``: the ADS8364 channels the parameters name
+        for the inputs; ``None`` (or no hook) leaves them to the board's defaults.
     """
 
     name: str
@@ -183,6 +186,7 @@ class FilterSpec:
     scenario: Callable | None = None
     presets: Mapping = field(default_factory=dict)
     measured: Callable | None = None
+    adc: Callable | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "points", MappingProxyType(dict(self.points)))
@@ -199,6 +203,24 @@ class FilterSpec:
     def outputs_for(self, params):
         """The output fields of a model with these parameters."""
         return tuple(self.outputs(params) if callable(self.outputs) else self.outputs)
+
+    def adc_channels(self, params, channel=None):
+        """The ADC channel of each input on the board: the parameters' own, else ``channel``
+        (default 0) for one input, 0, 1, ... for several. A ``channel`` that contradicts the
+        parameters raises ``ValueError``."""
+        given = self.adc(params) if self.adc is not None else None
+        count = len(self.inputs_for(params))
+        if given is not None:
+            if channel is not None and tuple(given) != (channel,):
+                raise ValueError(f"the model's adc = {list(given)} names the ADC channel(s) of its input(s); "
+                                 f"channel {channel} contradicts it")
+            return tuple(given)
+        if count == 1:
+            return (0 if channel is None else channel,)
+        if channel is not None:
+            raise ValueError(f"a model with {count} inputs reads one ADC channel each (model.adc, default "
+                             f"{list(range(count))}); a single channel does not apply")
+        return tuple(range(count))
 
     def measured_input(self, params):
         """The input that observes the default output directly, or ``None``."""

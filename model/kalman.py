@@ -87,6 +87,9 @@ class StateSpaceParams:
     gain:
         n x m: a fixed gain instead of the Riccati equation's (an alpha-beta filter), for the
         steady-state variant.
+    adc:
+        The ADS8364 channel (0..5 = A0..C1) of each observation on the board; default: A0 for
+        one observation (or ``--channel``), A0 and A1 for two.
     """
 
     F: tuple = ((1.0, 1.0), (0.0, 1.0))
@@ -99,6 +102,7 @@ class StateSpaceParams:
     T: float = 1.0
     observations: tuple = ()
     gain: tuple | None = None
+    adc: tuple | None = None
 
     def __post_init__(self):
         s = object.__setattr__
@@ -141,6 +145,22 @@ class StateSpaceParams:
         s(self, "observations", names)
         if self.gain is not None:
             s(self, "gain", matrix("gain", self.gain, n, m))
+        if self.adc is not None:
+            try:
+                adc = list(self.adc)
+            except TypeError:
+                raise TypeError(f"adc must be a list of {m} ADC channels (0..5), not {self.adc!r}") from None
+            if (len(adc) != m or not all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c <= 5 for c in adc)
+                    or len(set(adc)) != m):
+                raise ValueError(f"adc must be {m} different ADC channels 0..5 (A0..C1), one per observation, "
+                                 f"not {self.adc!r}")
+            s(self, "adc", tuple(adc))
+
+    def adc_channels(self, default=0):
+        """The ADC channel of each observation (``default`` for one observation not given one)."""
+        if self.adc is not None:
+            return self.adc
+        return (default,) if self.m == 1 else tuple(range(self.m))
 
     @property
     def n(self):
@@ -768,4 +788,5 @@ SPEC = FilterSpec(
     scenario=_scenario,
     presets=PRESETS,
     measured=_measured,
+    adc=lambda params: params.adc,
 )

@@ -13,6 +13,7 @@ import os
 import random
 import tomllib
 from pathlib import Path
+from typing import NamedTuple
 
 import cocotb
 import numpy as np
@@ -121,12 +122,14 @@ def make_source(params, count):
         for k in rng.sample(range(5, max(count, 10)), min(5, max(count - 5, 1))):
             glitches[k] = (params.get("channel", 0) if not params.get("six") else rng.randrange(6),
                            rng.choice([CODE_MAX, CODE_MIN]))
+    config = load_config(params)
+    adc = params.get("adc") or [params.get("channel") or 0]
     if params.get("csv"):
-        source = csv_source(params["csv"], clip=params.get("clip", False))
+        source = csv_source(params["csv"], clip=params.get("clip", False), config=config, adc=adc)
         source.glitches = glitches
         return source
-    return scenario_source(params.get("scenario", "sine"), count, params["seed"],
-                           load_config(params).params, glitches=glitches)
+    return scenario_source(params.get("scenario", "sine"), count, params["seed"], config.params, glitches=glitches,
+                           config=config, adc=adc)
 
 
 class CoreTB:
@@ -172,11 +175,41 @@ class FrontendTB:
 
 
 def _per_channel_float(config, variant, channels, codes, field):
-    """The float filter's ``field`` for each sample, each channel filtered on its own from reset."""
-    out = np.zeros(len(codes))
+    """The float filter's ``field`` for each sample, each channel filtered on its own from reset
+    (``codes`` an array, or ``{input: array}``)."""
+    out = np.zeros(len(channels))
     for ch in np.unique(channels):
         idx = np.flatnonzero(channels == ch)
-        out[idx] = float_run(config, variant, codes[idx])[field]
+        part = {k: v[idx] for k, v in codes.items()} if isinstance(codes, dict) else codes[idx]
+        out[idx] = float_run(config, variant, part)[field]
+    return out
+
+
+class Update(NamedTuple):
+    """The samples of one filter update: when the last came, its channel state, the codes
+    (an int, or ``{input: code}``), the conversion."""
+
+    time_ns: float
+    channel: int
+    codes: object
+    conversion: int
+
+
+def updates_of(reads, config, adc):
+    """The updates the ADC reads make: one per read for a one-input filter; for several inputs
+    one per conversion, of the reads of the inputs' channels ``adc``, when the last of them is
+    read (the hardware's order). Its channel is the first input's ADC channel."""
+    if len(config.inputs) == 1:
+        return [Update(r.time_ns, r.channel, r.code, r.conversion) for r in reads]
+    out, pending, conversion = [], {}, None
+    last = max(adc)
+    for r in reads:
+        if r.conversion != conversion:
+            pending, conversion = {}, r.conversion
+        if r.channel in adc:
+            pending[config.inputs[adc.index(r.channel)]] = r.code
+        if r.channel == last and len(pending) == len(adc):
+            out.append(Update(r.time_ns, adc[0], dict(pending), r.conversion))
     return out
 
 
@@ -195,6 +228,7 @@ class SystemTB:
         self.variant = params["variant"]
         self.six = bool(params.get("six"))
         self.field = params.get("out_field") or self.config.spec.default_output
+        self.adc_channels = list(params.get("adc") or [params.get("channel") or 0])
         dut._log.info(f"seed {params['seed']}")
         self.source = make_source(params, expected_conversions)
         self.adc = ADS8364(self.source)
@@ -241,14 +275,24 @@ class SystemTB:
         self._enough.clear()
         await self._enough.wait()
 
+    def updates(self):
+        """The filter updates of the reads so far (:func:`updates_of`)."""
+        return updates_of(self.adc.reads, self.config, self.adc_channels)
+
     def _error_vs_float(self):
         """The hardware's output field against the float filter (and the truth) on the same samples."""
-        n = min(len(self.outputs), len(self.adc.reads))
+        ups = self.updates()
+        n = min(len(self.outputs), len(ups))
         if n == 0:
             return {}
-        reads = self.adc.reads[:n]
+        reads = ups[:n]
         channels = np.array([r.channel for r in reads])
-        codes = np.array([r.code for r in reads], dtype=np.int64)
+        if isinstance(reads[0].codes, dict):
+            codes = {k: np.array([r.codes[k] for r in reads], dtype=np.int64) for k in self.config.inputs}
+            measured = self.config.spec.measured_input(self.config.params)
+            raw = codes[measured] if measured is not None else None
+        else:
+            codes = raw = np.array([r.codes for r in reads], dtype=np.int64)
         fmt = self.config.output_format(self.field)
         hw = fmt.to_float([o[2] for o in self.outputs[:n]])
         flt = _per_channel_float(self.config, self.variant, channels, codes, self.field)
@@ -269,22 +313,22 @@ class SystemTB:
                 rank[idx] = np.arange(len(idx))
             settle = min(100, int(np.min(np.bincount(channels)[np.unique(channels)])) // 10)
             w = rank >= settle
-            out.update({"rmse_raw": rmse(codes[w], t[w]), "rmse_float": rmse(flt[w], t[w]), "rmse_hw": rmse(hw[w], t[w]),
-                        "settle_per_channel": settle})
+            out.update({"rmse_raw": rmse(raw[w], t[w]) if raw is not None else None, "rmse_float": rmse(flt[w], t[w]),
+                        "rmse_hw": rmse(hw[w], t[w]), "settle_per_channel": settle})
         return out
 
     def report(self, wall_s, *, pending_allowed=2):
         """Scoreboard over everything so far, plus flags and speed."""
         sb = Scoreboard(self.config, self.variant)
         bounds = [*self.resets, float("inf")]
-        reads = self.adc.reads
+        reads = self.updates()
         outs = self.outputs
         i = j = 0
         for k, bound in enumerate(bounds):
             if k:
                 sb.reset()
             while i < len(reads) and reads[i].time_ns < bound:
-                sb.add_input(reads[i].channel, reads[i].code)
+                sb.add_input(reads[i].channel, reads[i].codes)
                 i += 1
             while j < len(outs) and outs[j][0] < bound:
                 _, ch, value, sticky = outs[j]

@@ -47,7 +47,7 @@ def _design_verilog(out_dir, design, config, opts):
     """Write the Verilog of ``design`` into ``out_dir``; returns ``(path, toplevel)``."""
     if design == "top":
         path, _ = write_top(out_dir, config, variant=opts["variant"], six_channel=opts.get("six", False),
-                            channel=opts.get("channel", 0))
+                            channel=opts.get("channel"))
         return path, TOP_NAME
     if design == "core":
         path, _ = write_block(out_dir, "core", config, variant=opts["variant"], channels=opts.get("channels", 1))

@@ -66,11 +66,16 @@ class Source:
         return np.array(cols).T
 
 
-def scenario_source(name, n, seed, params=None, *, glitches=None):
+def scenario_source(name, n, seed, params=None, *, glitches=None, config=None, adc=None):
     """Six channels of scenario ``name``: independent noise, channel c phase-shifted by c/6 turn.
 
     The phase shift keeps the channels distinguishable, so a channel mix-up cannot go unseen.
+    A ``config`` whose filter has scenarios of its own (``FilterSpec.scenario``) gets six runs of
+    them, seeded apart; with several inputs the first run's observations go on the ADC
+    channels ``adc`` (one per input) and its truth with them.
     """
+    if config is not None and config.spec.scenario is not None:
+        return _spec_source(name, n, seed, config, adc, glitches)
     params = KalmanParams() if params is None else params
     truth, y = scenarios.make(name, n + 6 * 337, seed, params, batch=(6,))
     # shift channel c by c * 337 samples: distinct waveforms from one seeded run
@@ -79,8 +84,31 @@ def scenario_source(name, n, seed, params=None, *, glitches=None):
     return Source(shifted, truth=truths, glitches=glitches, name=f"{name} (seed {seed})")
 
 
-def csv_source(path, *, clip=False):
-    """Replay a CSV: columns ``y0``..``y5`` if present, else the ``y`` column on all six."""
+def _spec_source(name, n, seed, config, adc, glitches):
+    codes, truths = np.zeros((6, n), dtype=np.int64), np.zeros((6, n))
+    first = None
+    for c in range(6):
+        truth, y = config.spec.scenario(name, n, seed + 1009 * c, config.params)
+        first = (truth, y) if first is None else first
+        codes[c] = next(iter(y.values())) if isinstance(y, dict) else y
+        truths[c] = truth
+    truth, y = first
+    if isinstance(y, dict):
+        for channel, obs in zip(adc, config.inputs, strict=True):
+            codes[channel], truths[channel] = y[obs], truth
+    return Source(codes, truth=truths, glitches=glitches, name=f"{name} (seed {seed})")
+
+
+def csv_source(path, *, clip=False, config=None, adc=None):
+    """Replay a CSV: columns ``y0``..``y5`` if present, else the ``y`` column on all six. A
+    ``config`` with several inputs reads their columns (the observation names) onto the ADC
+    channels ``adc``, one per input."""
+    if config is not None and len(config.inputs) > 1:
+        samples = read_samples(path, clip=clip, columns=config.inputs)
+        codes = np.zeros((6, len(samples)), dtype=np.int64)
+        for channel, obs in zip(adc, config.inputs, strict=True):
+            codes[channel] = samples.codes[obs]
+        return Source(codes, name=f"csv {path}")
     header = read_header(path)
     if all(f"y{c}" in header for c in range(6)):
         codes = np.stack([read_samples(path, clip=clip, column=f"y{c}").y for c in range(6)])

@@ -174,14 +174,14 @@ def test_filters_lists_the_registry(capsys):
     assert "--variant steady" in out and "--variant full" in out and "outputs x1, x2, yhat" in out
     code, out, _ = run_cli(capsys, "filters", "--json")
     rows = json.loads(out)
-    assert [r["name"] for r in rows] == ["kalman2"] and rows[0]["default"]
+    assert [r["name"] for r in rows] == ["kalman2", "kalman"] and rows[0]["default"] and not rows[1]["default"]
 
 
 def test_filter_option_and_config_must_agree(capsys, tmp_path):
     code, out, _ = run_cli(capsys, "compare", "--filter", "kalman2", "--samples", "300", "--seed", "1", "--json")
     assert code == 0 and json.loads(out)["filter"] == "kalman2"
     code, _, err = run_cli(capsys, "compare", "--filter", "nosuch", "--samples", "300")
-    assert code == 2 and err.strip() == "kfpga compare: error: --filter: no filter named 'nosuch'; registered: kalman2"
+    assert code == 2 and err.strip() == "kfpga compare: error: --filter: no filter named 'nosuch'; registered: kalman2, kalman"
     code, _, err = run_cli(capsys, "compare", "--variant", "fast", "--samples", "300")
     assert code == 2 and err.strip() == ("kfpga compare: error: variant must be one of steady, full for the kalman2 "
                                          "filter, not 'fast'")
@@ -198,19 +198,27 @@ def test_readme_synopsis_is_the_parsers():
 
 
 def test_pins_write_follows_the_out_field_width(capsys, tmp_path):
-    from kfpga.quartus import load_pins
+    from kfpga.quartus import BUILTIN_OUT_BITS, SPARE_OUT_PINS, load_pins
 
+    # 28 bits: the two bits past the built-in 26 take the first spare pins of the board
     cfg = tmp_path / "wide.toml"
     cfg.write_text('[formats.x1]\nformat = "Q18.10"\n[formats.xl1]\nformat = "Q18.10"\n')
     table = tmp_path / "wide_pins.csv"
     code, _, err = run_cli(capsys, "pins", "--config", str(cfg), "--write", str(table))
-    assert code == 0 and err.strip() == f"wrote {table}; 2 port bit(s) still need a pin of your board"
-    rows = load_pins(table)
-    data = [r for r in rows if r.port == "out_data"]
-    assert [r.bit for r in data] == list(range(28)) and [r.pin for r in data[26:]] == ["", ""]
+    assert code == 0 and err.strip() == f"wrote {table}"
+    data = [r for r in load_pins(table) if r.port == "out_data"]
+    assert [r.bit for r in data] == list(range(28))
+    assert [r.pin for r in data[BUILTIN_OUT_BITS:]] == [f"PIN_{p}" for p in SPARE_OUT_PINS[:2]]
+    assert len({r.pin for r in load_pins(table)}) == len(load_pins(table)), "a pin is used twice"
+    # 40 bits: past the spare pins, the last four rows need the user's pins
+    cfg.write_text('[formats.x1]\nformat = "Q30.10"\n[formats.xl1]\nformat = "Q30.10"\n')
+    code, _, err = run_cli(capsys, "pins", "--config", str(cfg), "--write", str(table))
+    assert code == 0 and err.strip() == f"wrote {table}; 4 port bit(s) still need a pin of your board"
+    data = [r for r in load_pins(table) if r.port == "out_data"]
+    assert [r.bit for r in data] == list(range(40)) and [r.pin for r in data[36:]] == [""] * 4
     code, _, err = run_cli(capsys, "generate", "--config", str(cfg), "--pins", str(table), "--out", str(tmp_path / "o"),
                            "--no-lint")
-    assert code == 2 and "out_data[26] has no pin yet; give it one of your board's free user I/O pins" in err
+    assert code == 2 and "out_data[36] has no pin yet; give it one of your board's free user I/O pins" in err
     # x2 on out_data: 25 bits, the default table's extra rows dropped
     code, out, _ = run_cli(capsys, "pins", "--out-field", "x2")
     assert code == 0 and sum(1 for line in out.splitlines() if line.startswith("out_data,")) == 25

@@ -31,7 +31,7 @@ CASES = [
     ("toml-formats-5", ["compare", "--config", "k.toml"], {"k.toml": "formats = 5\n"},
      "k.toml: formats must be a table ([formats]), not 5"),
     ("toml-filter-name", ["compare", "--config", "k.toml"], {"k.toml": '[filter]\nname = "nope"\n'},
-     "k.toml: filter.name: no filter named 'nope'; registered: kalman2"),
+     "k.toml: filter.name: no filter named 'nope'; registered: kalman2, kalman"),
     ("toml-bad-format", ["formats", "--config", "k.toml"], {"k.toml": '[formats.x1]\nformat = "18.8"\n'},
      "formats.x1: format must look like 'Q18.8' (integer bits incl. sign . fraction bits), not '18.8'"),
     ("toml-format-and-bits", ["formats", "--config", "k.toml"],
@@ -95,12 +95,12 @@ CASES = [
     ("pins-missing-bit", ["generate", "--out", "o", "--pins", "p.csv", "--no-lint"],
      {"p.csv": "port,bit,pin,io_standard\nclk50,,PIN_34,3.3-V LVTTL\n"}, None),
     ("pins-wide-x1", ["generate", "--out", "o", "--config", "k.toml", "--no-lint"],
-     {"k.toml": '[formats.x1]\nformat = "Q18.10"\n[formats.xl1]\nformat = "Q18.10"\n'}, None),
+     {"k.toml": '[formats.x1]\nformat = "Q30.10"\n[formats.xl1]\nformat = "Q30.10"\n'}, None),
     ("pins-write-dir", ["pins", "--write", "d"], {"d/x": ""}, "--write d: is a directory; give a file name"),
     ("formats-toml-and-json", ["formats", "--toml", "--json"], {}, "--toml and --json are two ways to print the same: choose one"),
     ("formats-pin-without-toml", ["formats", "--pin-formats"], {},
      "--pin-formats does not apply with the table: it says how --toml writes the formats"),
-    ("filter-name", ["formats", "--filter", "nope"], {}, "--filter: no filter named 'nope'; registered: kalman2"),
+    ("filter-name", ["formats", "--filter", "nope"], {}, "--filter: no filter named 'nope'; registered: kalman2, kalman"),
     ("config-unknown-key", ["compare", "--config", "k.toml"], {"k.toml": "[model]\nP1 = 3\n"},
      "k.toml: unknown key model.P1; the kalman2 filter has: T, Q, R, P0, x0"),
     ("simulate-channel-six", ["simulate", "--channels", "6", "--channel", "A1"], {},
@@ -122,7 +122,7 @@ CASES = [
 SUBJECTS = {
     "toml-syntax": "k.toml: not valid TOML: ",
     "pins-missing-bit": "p.csv: no pin for rst_n, adc_clk",
-    "pins-wide-x1": "no pin for out_data[26], out_data[27]",
+    "pins-wide-x1": "no pin for out_data[36], out_data[37], out_data[38], out_data[39]",
     "argparse-choice": "argument --simulator: invalid choice: 'modelsim'",
 }
 

@@ -131,7 +131,7 @@ def test_unknown_keys_are_rejected():
         KalmanConfig.from_dict({"modle": {}})
     with pytest.raises(ConfigError, match=exactly("formats.x1: rounding must be one of floor, half_up, not 'up'")):
         KalmanConfig.from_dict({"formats": {"x1": {"format": "Q18.8", "rounding": "up"}}})
-    with pytest.raises(ConfigError, match=exactly("config: filter.name: no filter named 'kalman9'; registered: kalman2")):
+    with pytest.raises(ConfigError, match=exactly("config: filter.name: no filter named 'kalman9'; registered: kalman2, kalman")):
         KalmanConfig.from_dict({"filter": {"name": "kalman9"}})
     with pytest.raises(ConfigError, match=exactly(
             "config: unknown key(s) filter.T; [filter] has only name (the parameters go in [model])")):

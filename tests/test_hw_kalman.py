@@ -8,6 +8,7 @@ backpressure, the declared latency and cycles per update measured, the cycle bud
 time-varying core, and cocotb on the generated Verilog on both simulators.
 """
 
+import dataclasses
 import os
 
 import numpy as np
@@ -132,3 +133,45 @@ def test_preset_cosimulation_is_bit_exact(preset, variant, simulator, seed):
                          "p_ready": 0.7, "config_toml": config.to_toml()}, tag=f"preset-{preset}-{variant}")
     assert result["mismatches"] == 0 and result["ok"], result.get("first_mismatches")
     assert result["samples"] == samples
+
+
+def _two_observation_config(adc):
+    _, params = registry.preset("va2")
+    return FilterConfig(filter="kalman", params=dataclasses.replace(params, adc=adc))
+
+
+@pytest.mark.cosim
+@pytest.mark.parametrize("simulator", SIMULATORS)
+@pytest.mark.parametrize("adc", [None, (3, 1)], ids=["A0-A1", "B1-A1"])
+def test_board_with_two_observations_is_bit_exact(simulator, adc, seed):
+    """The whole design for va2: both observations' ADC channels sampled at one instant, one
+    update per conversion with both samples (in either channel order), every estimate equal."""
+    ok, why = simulator_available(simulator)
+    if not ok:
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"CI must run both simulators: {why}")
+        pytest.skip(why)
+    config = _two_observation_config(adc)
+    channels = list(config.spec.adc_channels(config.params))
+    result = run(build(simulator, "top", config=config, variant="steady"), "test_top", testcase="system_bit_exact",
+                 params={"variant": "steady", "seed": seed, "samples": 250, "adc": channels,
+                         "channel": channels[0], "config_toml": config.to_toml()}, tag="two-observations")
+    assert result["mismatches"] == 0 and result["ok"], result.get("first_mismatches")
+    assert result["samples"] >= 250
+    assert result["rmse_hw"] <= 1.05 * result["rmse_float"] < result["rmse_raw"]
+
+
+def test_board_refuses_what_does_not_apply_to_two_observations():
+    from kfpga.hw.top import FilterSystem
+
+    config = _two_observation_config((3, 1))
+    with pytest.raises(ValueError, match=r"^six channels of their own need a one-input filter; this model reads 2 "
+                                         r"ADC channels per update$"):
+        FilterSystem(config, six_channel=True)
+    with pytest.raises(ValueError, match=r"^the model's adc = \[3, 1\] names the ADC channel\(s\) of its input\(s\); "
+                                         r"channel 2 contradicts it$"):
+        FilterSystem(config, channel=2)
+    assert FilterSystem(config).adc == (3, 1)
+    with pytest.raises(ValueError, match=r"^adc must be 2 different ADC channels 0..5 \(A0..C1\), one per "
+                                         r"observation, not \(1, 1\)$"):
+        _two_observation_config((1, 1))
