@@ -43,7 +43,7 @@ class Core(wiring.Component):
 
     def __init__(self, config, variant, channels):
         check_channels(channels)
-        config.require_variant(variant)
+        config.require_hardware(variant)
         self.config = config
         self.variant = variant
         self.channels = channels

@@ -132,9 +132,7 @@ class FullCore(Core):
     """
 
     def __init__(self, config, *, channels=1):
-        if config.params.m != 1:
-            raise ValueError(f"the time-varying core takes one observation; this model has {config.params.m} "
-                             "(two observations are model-only: use the steady variant for hardware)")
+        config.require_hardware("full")
         super().__init__(config, "full", channels)
         f, n = config.formats, config.params.n
         self.n = n

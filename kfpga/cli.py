@@ -47,8 +47,9 @@ def _bit_range(text):
     return list(range(lo, hi + 1))
 
 
-def _load_config(args):
-    """The config of ``--config`` and ``--filter`` (which must agree), with ``--variant`` checked."""
+def _load_config(args, *, hardware=False):
+    """The config of ``--config`` and ``--filter`` (which must agree), with ``--variant`` checked
+    (``hardware``: and refused when it has no core for this model)."""
     from kfpga import registry
     from kfpga.config import FilterConfig
 
@@ -76,7 +77,7 @@ def _load_config(args):
     if hasattr(args, "variant"):
         if args.variant is None:
             args.variant = config.spec.default_variant
-        config.require_variant(args.variant)
+        (config.require_hardware if hardware else config.require_variant)(args.variant)
     return config
 
 
@@ -441,7 +442,7 @@ def _run_generate(args):
 
     check_output_dir(args.out, option="--out")
     _check_channel(args)
-    config = _load_config(args)
+    config = _load_config(args, hardware=True)
     _check_channel(args, config)
     if args.ratio < 2:
         raise UsageError(f"--ratio must be >= 2, not {args.ratio}")
@@ -484,7 +485,7 @@ def _run_pins(args):
 
     if args.write:
         check_output_file(args.write, option="--write", inputs=(args.pins, args.config), extensions=(".csv",))
-    config = _load_config(args)
+    config = _load_config(args, hardware=True)
     try:
         field = out_field(config, args.out_field)
     except ValueError as exc:
@@ -512,7 +513,7 @@ def _run_resources(args):
     from kfpga.hw.timing import DERATE_C8
     from kfpga.quartus import io_timing
 
-    config = _load_config(args)
+    config = _load_config(args, hardware=True)
     six = args.channels == 6
     results = {}
     with tempfile.TemporaryDirectory() as tmp, tqdm(total=4 if args.ecp5 else 2, desc="yosys synth_intel",
@@ -601,7 +602,7 @@ def _run_simulate(args):
     from kfpga.tools import simulator_available
 
     _check_channel(args)
-    config = _load_config(args)
+    config = _load_config(args, hardware=True)
     _check_channel(args, config)
     ok, why = simulator_available(args.simulator)
     if not ok:

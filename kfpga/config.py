@@ -246,6 +246,13 @@ class FilterConfig:
         if why:
             raise ConfigError(why)
 
+    def require_hardware(self, variant):
+        """Refuse a variant that has no core for these parameters (it may still run as a model)."""
+        self.require_variant(variant)
+        why = self.spec.variants[variant].hardware(self.params)
+        if why:
+            raise ConfigError(why)
+
     # -- TOML ---------------------------------------------------------------------------
     @classmethod
     def from_toml(cls, path):

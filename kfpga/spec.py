@@ -95,6 +95,11 @@ class Variant:
     update:
         ``update(ops, k, x, u) -> (x_next, outputs)``: ``k`` the constants, ``x`` the state,
         ``u`` the inputs, all :class:`~kfpga.ops.Fx`; returns dicts of Fx.
+    applies:
+        ``applies(params) -> None | why not``: whether these parameters can use the variant.
+    hardware:
+        ``hardware(params) -> None | why not``: whether the variant has a core for these
+        parameters (a variant may be model-only for some of them).
     """
 
     name: str
@@ -104,6 +109,7 @@ class Variant:
     initial: Callable
     update: Callable
     applies: Callable = field(default=lambda params: None)  # params -> None or why not
+    hardware: Callable = field(default=lambda params: None)  # params -> None or why there is no core
 
     def state_for(self, params):
         """``((name, point), ...)`` of a model with these parameters."""

@@ -531,6 +531,13 @@ def _full_applies(params):
     return None
 
 
+def _full_hardware(params):
+    if params.m != 1:
+        return (f"the time-varying variant with {params.m} observations is model-only (compare, sweep, filter, "
+                "formats): its core takes one observation; use the steady variant for hardware")
+    return None
+
+
 def _steady_state(params):
     return tuple((f"x{i + 1}", f"x{i + 1}") for i in range(params.n))
 
@@ -544,7 +551,8 @@ VARIANT_SPECS = {
     "steady": Variant("steady", "constant gain K from the Riccati equation (or given): no divider",
                       _steady_state, _steady_constants, _initial, steady_update, _steady_applies),
     "full": Variant("full", "time-varying gain: P, S and a restoring divider per update (two observations: "
-                            "model only)", _full_state, _full_constants, _full_initial, full_update, _full_applies),
+                            "model only)", _full_state, _full_constants, _full_initial, full_update, _full_applies,
+                    _full_hardware),
 }
 
 
