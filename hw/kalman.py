@@ -66,14 +66,33 @@ def _correct(ops, k, live):
     return live
 
 
+# With two observations x = xl + K e sums three terms, and the sum is split over two steps:
+# xl + K_i1 e_1, exact, then that plus K_i2 e_2, rounded. The model's exact sum adds its terms
+# in the same order, so the integers are the same by construction.
+def _correct_first(ops, k, live):
+    for i in range(k["n"]):                                                     # xl + K_i1 e_1, exact
+        live[f"xk{i + 1}"] = ops.add(live[f"xl{i + 1}"], live[f"ke{i}0"])
+    return live
+
+
+def _correct_second(ops, k, live):
+    partial = [live[f"xk{i + 1}"] for i in range(k["n"])]
+    products = [[live[f"ke{i}1"]] for i in range(k["n"])]
+    for i, v in enumerate(eq.correct(ops, k, partial, products)):              # x = [xl + K_i1 e_1 + K_i2 e_2]_x
+        live[f"x{i + 1}_next"] = v
+    return live
+
+
 _ALL = range(1, 5)
 _OBS = range(1, 3)
 
 
 def default_stages(params):
-    """The register stages of the steady loop when none are asked for: 4, or 5 when a row of F
-    sums three or more states (its exact sum and its rounding then get a stage each)."""
-    return 5 if any(sum(1 for v in row if v != 0) >= 3 for row in params.F) else 4
+    """The register stages of the steady loop when none are asked for: 4; one more when a row of F
+    sums three or more states (its exact sum and its rounding then get a stage each), and one more
+    with two observations (x = xl + K e then sums three terms, over two stages)."""
+    wide_f = any(sum(1 for v in row if v != 0) >= 3 for row in params.F)
+    return 4 + wide_f + (params.m == 2)
 
 
 class SteadyCore(LoopPipeline):
@@ -81,7 +100,9 @@ class SteadyCore(LoopPipeline):
 
     Five steps (``stages`` 1..5 register stages, :attr:`cuts`): the exact sums F x; their
     rounding xl = [F x]; yh = H xl and e = y - yh; the products K e; x = xl + K e. With four
-    stages the first two steps share one, with fewer the steps are grouped further. One
+    stages the first two steps share one, with fewer the steps are grouped further. With two
+    observations the last step is split in two (``stages`` 1..6): xl + K_i1 e_1, exact, then
+    x = [that + K_i2 e_2]. One
     channel takes a sample every L cycles, C >= L channels in turn one per clock. The default
     L is :func:`default_stages`. Parameters and members as
     :class:`~kfpga.hw.kalman2.SteadyKalman`; the input word has one field per observation.
@@ -91,6 +112,8 @@ class SteadyCore(LoopPipeline):
     reads = ({f"x{i}" for i in _ALL}, {f"xs{i}" for i in _ALL}, {f"xl{i}" for i in _ALL} | {"y", "y1", "y2"},
              {f"e{j}" for j in _OBS}, {f"xl{i}" for i in _ALL} | {f"ke{i}{j}" for i in range(4) for j in range(2)})
     cuts: ClassVar[dict] = MappingProxyType({1: (), 2: (3,), 3: (2, 4), 4: (2, 3, 4), 5: (1, 2, 3, 4)})
+    cuts_two_observations: ClassVar[dict] = MappingProxyType(
+        {1: (), 2: (3,), 3: (2, 4), 4: (2, 3, 4), 5: (2, 3, 4, 5), 6: (1, 2, 3, 4, 5)})
     carry = ("yh1", "yh2")
 
     def __init__(self, config, *, channels=1, stages=None):
@@ -99,6 +122,11 @@ class SteadyCore(LoopPipeline):
         # the observations' names are the model's own: the step after the prediction reads them
         names = set(config.inputs)
         self.reads = (*self.reads[:2], self.reads[2] | names, *self.reads[3:])
+        if config.params.m == 2:
+            self.steps = (*self.steps[:4], _correct_first, _correct_second)
+            self.reads = (*self.reads[:4], {f"xl{i}" for i in _ALL} | {f"ke{i}0" for i in range(4)},
+                          {f"xk{i}" for i in _ALL} | {f"ke{i}1" for i in range(4)})
+            self.cuts = self.cuts_two_observations
         stages = default_stages(config.params) if stages is None else stages
         super().__init__(config, "steady", channels=channels, stages=stages)
 
