@@ -44,7 +44,9 @@ def apytypes_filter(cfg, model, y):
     """The steady-state filter on APyTypes scalars, cast at every register write."""
     f = cfg.formats
     k, x0 = cfg.constant_raw("steady"), model.reset
-    q = {"floor": apy.QuantizationMode.TRN, "half_up": apy.QuantizationMode.RND}
+    q = {"floor": apy.QuantizationMode.TO_NEG, "nearest": apy.QuantizationMode.TIES_POS,
+         "round": apy.QuantizationMode.TIES_AWAY, "convergent": apy.QuantizationMode.TIES_EVEN,
+         "fix": apy.QuantizationMode.TO_ZERO}
     o = {"saturate": apy.OverflowMode.SAT, "wrap": apy.OverflowMode.WRAP}
 
     def fx(raw, fmt):
@@ -80,7 +82,9 @@ def fxpmath_filter(cfg, model, y):
     k, x0 = cfg.constant_raw("steady"), model.reset
 
     def quant(value, fmt):
-        half = fmt.lsb / 2 if fmt.rounding.value == "half_up" else 0.0
+        if fmt.rounding.value not in ("floor", "nearest"):
+            raise ValueError(f"this port takes floor or nearest rounding, not {fmt.rounding.value}")
+        half = fmt.lsb / 2 if fmt.rounding.value == "nearest" else 0.0
         return Fxp(value + half, signed=True, n_word=fmt.width, n_frac=fmt.frac_bits,
                    rounding="floor", overflow=fmt.overflow.value)
 

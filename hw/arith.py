@@ -20,6 +20,29 @@ from kfpga.ops import Ops
 __all__ = ["AmaranthOps", "requantize"]
 
 
+def _round_addend(value, shift, rounding):
+    """:func:`kfpga.fixed.round_addend` in bits: an unsigned ``shift``-bit addend (``None``: 0).
+
+    ``h = 2**(shift-1)`` is ``1`` then ``shift-1`` zeros; ``h - 1`` is ``0`` then ones; so ``round``'s
+    ``h - sign`` is ``~sign`` then copies of ``sign``, ``convergent``'s ``h - 1 + b`` is ``b`` then
+    copies of ``~b`` (``b`` the bit that becomes the LSB), and ``fix``'s addend is ``shift`` copies of
+    the sign: no adder beyond the one every rounding rule needs.
+    """
+    rounding = Rounding(rounding)
+    sign = value[-1]
+    low = shift - 1
+    if rounding is Rounding.FLOOR:
+        return None
+    if rounding is Rounding.NEAREST:
+        return Const(1 << low, shift)
+    if rounding is Rounding.ROUND:
+        return Cat(sign.replicate(low), ~sign)
+    if rounding is Rounding.CONVERGENT:
+        b = value[shift] if shift < len(value) else sign
+        return Cat((~b).replicate(low), b)
+    return sign.replicate(shift)  # FIX
+
+
 def requantize(m, value, src_frac, fmt, *, name):
     """Write ``value * 2**-src_frac`` into ``fmt``: returns ``(result, overflowed)`` signals.
 
@@ -32,8 +55,9 @@ def requantize(m, value, src_frac, fmt, *, name):
     # shift_left/shift_right, not << and >>: with an int amount those build a variable shift,
     # as wide as the largest shift its amount's bits could give
     if shift > 0:
-        if fmt.rounding is Rounding.HALF_UP:
-            value = value + Const(1 << (shift - 1), signed(shift + 1))
+        addend = _round_addend(value, shift, fmt.rounding)
+        if addend is not None:
+            value = value + addend
         value = value.shift_right(shift)  # arithmetic: value is signed
     elif shift < 0:
         value = value.shift_left(-shift)

@@ -380,11 +380,12 @@ def _run_formats(args):
     if args.json:
         _emit_json(rows)
         return 0
-    print(f"{'point':<6} {'format':<7} {'bits':>4} {'covers':>12} {'analysed max':>13} {'rounding':<8} {'overflow':<9} description")
+    print(f"{'point':<6} {'format':<7} {'bits':>4} {'covers':>12} {'analysed max':>13} {'rounding':<10} "
+          f"{'overflow':<9} description")
     for r in rows:
         amax = f"{r['analysed_max']:.6g}" if r["analysed_max"] is not None else "-"
         op = " [multiplier operand]" if r["multiplier_operand"] else ""
-        print(f"{r['point']:<6} {r['format']:<7} {r['bits']:>4} {r['covers']:>12} {amax:>13} {r['rounding']:<8} "
+        print(f"{r['point']:<6} {r['format']:<7} {r['bits']:>4} {r['covers']:>12} {amax:>13} {r['rounding']:<10} "
               f"{r['overflow']:<9} {r['description']}{op}")
     return 0
 

@@ -33,6 +33,19 @@ from kfpga.ops import Fx, Ops, divide, quotient_bits
 __all__ = ["TraceOps", "FloatTraceOps", "Kernel", "compile_stage", "compile_float_ranges"]
 
 
+def _addend_source(v, shift, rounding):
+    """:func:`~kfpga.fixed.round_addend` as Python source over the expression ``v`` (ints or
+    int64 arrays alike: a comparison gives a bool, or a bool array, that counts as 0 or 1)."""
+    half = 1 << (shift - 1)
+    return {
+        Rounding.FLOOR: "",
+        Rounding.NEAREST: f" + {half}",
+        Rounding.ROUND: f" + {half} - ({v} < 0)",
+        Rounding.CONVERGENT: f" + {half - 1} + (({v} >> {shift}) & 1)",
+        Rounding.FIX: f" + ({v} < 0) * {(1 << shift) - 1}",
+    }[Rounding(rounding)]
+
+
 @dataclass(frozen=True)
 class _T:
     """A traced payload: a Python expression and the interval of the integer it holds."""
@@ -91,8 +104,8 @@ class TraceOps(Ops):
         shift = src_frac - fmt.frac_bits
         lo, hi = shift_round(x.lo, shift, fmt.rounding), shift_round(x.hi, shift, fmt.rounding)
         if shift > 0:
-            half = f" + {1 << (shift - 1)}" if fmt.rounding is Rounding.HALF_UP else ""
-            value = self._var(f"({x.expr}{half}) >> {shift}" if half else f"{x.expr} >> {shift}", lo, hi)
+            add = _addend_source(x.expr, shift, fmt.rounding)
+            value = self._var(f"({x.expr}{add}) >> {shift}" if add else f"{x.expr} >> {shift}", lo, hi)
         elif shift < 0:
             value = self._var(f"{x.expr} << {-shift}", lo, hi)
         else:

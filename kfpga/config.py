@@ -363,7 +363,7 @@ def params_from_dict(spec, model, source="config"):
 def format_from_toml(name, spec):
     """A format from ``"Q18.8"`` or a table ``{format | int_bits + frac_bits, rounding, overflow}``.
 
-    Omitted rules keep the defaults (``half_up``, ``saturate``).
+    Omitted rules keep the defaults (``nearest``, ``saturate``).
     """
     from kfpga.fixed import Overflow, Rounding
 
@@ -377,7 +377,7 @@ def format_from_toml(name, spec):
     if "format" in spec and ({"int_bits", "frac_bits"} & set(spec)):
         raise ConfigError(f"formats.{name}: give either format or int_bits and frac_bits, not both")
     try:
-        rules = {"rounding": spec.get("rounding", Rounding.HALF_UP.value),
+        rules = {"rounding": spec.get("rounding", Rounding.NEAREST.value),
                  "overflow": spec.get("overflow", Overflow.SATURATE.value)}
         if "format" in spec:
             fmt = QFormat.parse(spec["format"], **rules)

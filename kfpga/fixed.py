@@ -11,8 +11,9 @@ the model and the RTL produce identical integers.
 
 The functions accept Python ``int`` (arbitrary precision) or numpy ``int64`` arrays. They are
 written with shifts and compares instead of ``np.round`` (ties to even) or fxpmath (2000x
-slower in a sample loop) so that the rounding is exactly the hardware's: ``floor`` is an
-arithmetic right shift, ``half_up`` adds half an LSB first.
+slower in a sample loop) so that the rounding is exactly the hardware's: every rule adds a
+constant below one LSB (:func:`round_addend`, which for some rules depends on the sign or on the
+bit that becomes the LSB) and then shifts right arithmetically.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from enum import StrEnum
 
 import numpy as np
 
-__all__ = ["Rounding", "Overflow", "QFormat", "shift_round", "requantize", "to_raw", "bits_for"]
+__all__ = ["Rounding", "Overflow", "QFormat", "round_addend", "shift_round", "requantize", "to_raw", "bits_for"]
 
 # numpy int64 holds every intermediate exactly as long as it stays below 2**62 in magnitude
 # (one bit of margin for the rounding add); config validation enforces this bound.
@@ -31,12 +32,27 @@ INT64_SAFE_BITS = 62
 
 
 class Rounding(StrEnum):
-    """How fraction bits are dropped."""
+    """How fraction bits are dropped, named as MATLAB's fixed-point tools name them.
 
+    ``half_up`` is accepted as another name of ``nearest``.
+    """
+
+    #: To nearest, ties toward plus infinity: add half an LSB, then shift right.
+    NEAREST = "nearest"
+    #: To nearest, ties away from zero.
+    ROUND = "round"
+    #: To nearest, ties to even (the LSB of the result 0).
+    CONVERGENT = "convergent"
     #: Toward minus infinity: an arithmetic right shift.
     FLOOR = "floor"
-    #: To nearest, ties toward plus infinity: add half an LSB, then shift right.
-    HALF_UP = "half_up"
+    #: Toward zero.
+    FIX = "fix"
+    #: The earlier name of ``nearest``.
+    HALF_UP = "nearest"
+
+    @classmethod
+    def _missing_(cls, value):
+        return cls.NEAREST if value == "half_up" else None
 
 
 class Overflow(StrEnum):
@@ -81,7 +97,7 @@ class QFormat:
             object.__setattr__(self, "rounding", Rounding(self.rounding))
         except ValueError:
             choices = ", ".join(r.value for r in Rounding)
-            raise ValueError(f"rounding must be one of {choices}, not {self.rounding!r}") from None
+            raise ValueError(f"rounding must be one of {choices} (half_up: nearest), not {self.rounding!r}") from None
         try:
             object.__setattr__(self, "overflow", Overflow(self.overflow))
         except ValueError:
@@ -145,6 +161,30 @@ def bits_for(magnitude, frac_bits):
     return i
 
 
+def round_addend(raw, shift, rounding):
+    """What ``rounding`` adds to ``raw`` before an arithmetic right shift by ``shift > 0``.
+
+    With ``h = 2**(shift-1)`` (half an LSB of the result): ``floor`` 0; ``nearest`` h; ``round``
+    h, less one for a negative ``raw`` (a negative tie then stays below the next integer);
+    ``convergent`` h - 1, plus one when the bit that becomes the LSB is 1 (a tie then goes to
+    the even neighbour); ``fix`` ``2**shift - 1`` for a negative ``raw`` (floor of a negative value
+    plus almost one LSB is its truncation toward zero). The RTL builds the same addends from
+    the sign bit and bit ``shift`` (``hw/arith.py``).
+    """
+    rounding = Rounding(rounding)
+    half = 1 << (shift - 1)
+    if rounding is Rounding.FLOOR:
+        return 0
+    if rounding is Rounding.NEAREST:
+        return half
+    negative = raw < 0
+    if rounding is Rounding.ROUND:
+        return half - negative
+    if rounding is Rounding.CONVERGENT:
+        return half - 1 + ((raw >> shift) & 1)
+    return negative * ((1 << shift) - 1)  # FIX
+
+
 def shift_round(raw, shift, rounding):
     """Drop ``shift`` fraction bits of ``raw`` (int or int64 array) with ``rounding``.
 
@@ -152,9 +192,7 @@ def shift_round(raw, shift, rounding):
     """
     if shift <= 0:
         return raw << -shift
-    if rounding is Rounding.HALF_UP:
-        return (raw + (1 << (shift - 1))) >> shift
-    return raw >> shift
+    return (raw + round_addend(raw, shift, rounding)) >> shift
 
 
 def requantize(raw, src_frac, fmt):

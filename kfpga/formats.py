@@ -9,7 +9,7 @@
 * A point that holds only constants gets no guard bit; a point ``same_as`` another shares its
   format.
 
-All defaults round ``half_up`` and ``saturate``.
+All defaults round ``nearest`` (ties toward +inf) and ``saturate``.
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ def register_formats(spec, params, ranges, *, operand_bits=MULTIPLIER_BITS, stat
             if need + g > operand_bits - 1:
                 g = 0  # no room: keep the fraction bit, let saturation (flagged) cover the rest
             i = need + g
-            formats[name] = QFormat(i, max(operand_bits - i, 0), Rounding.HALF_UP)
+            formats[name] = QFormat(i, max(operand_bits - i, 0), Rounding.NEAREST)
     for name in names:
         point = points[name]
         if point.operand or point.same_as is not None:
@@ -59,7 +59,7 @@ def register_formats(spec, params, ranges, *, operand_bits=MULTIPLIER_BITS, stat
             frac = formats[point.frac].frac_bits if point.frac in formats else 0
         else:
             frac = state_frac if point.frac is None else point.frac
-        formats[name] = QFormat(bits_for(reach(name), frac) + guard(name), frac, Rounding.HALF_UP)
+        formats[name] = QFormat(bits_for(reach(name), frac) + guard(name), frac, Rounding.NEAREST)
     for name in names:
         if points[name].same_as is not None:
             formats[name] = formats[points[name].same_as]

@@ -485,8 +485,15 @@ def _paren(text):
 def quantise_fraction(value, fmt):
     """An exact rational written into ``fmt``: ``(raw, overflowed)`` by the format's rules."""
     scaled = Fraction(value) * (1 << fmt.frac_bits)
-    if fmt.rounding is Rounding.HALF_UP:
+    # each rule from its definition, sharing nothing with round_addend
+    if fmt.rounding is Rounding.NEAREST:
         raw = math.floor(scaled + Fraction(1, 2))
+    elif fmt.rounding is Rounding.ROUND:
+        raw = math.floor(abs(scaled) + Fraction(1, 2)) * (1 if scaled >= 0 else -1)
+    elif fmt.rounding is Rounding.CONVERGENT:
+        raw = round(scaled)  # Fraction.__round__: to nearest, ties to even
+    elif fmt.rounding is Rounding.FIX:
+        raw = math.trunc(scaled)
     else:
         raw = math.floor(scaled)
     if fmt.min_raw <= raw <= fmt.max_raw:
@@ -500,7 +507,7 @@ class FractionOps(Ops):
     """Exact rational values (``Fraction``), each written once into its point's format.
 
     The payload is the real value itself, so no alignment shift is ever formed; rounding is
-    ``floor(value * 2**frac)`` (plus one half for ``half_up``) and the division is the exact
+    each rule applied to the exact ``value * 2**frac`` by its definition, and the division is the exact
     quotient truncated toward zero. This shares nothing with :class:`IntOps` but the equations,
     which makes it the spec the integer model is tested against.
     """

@@ -247,7 +247,7 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
     fv = formats["v"]
     if k is not None and fv.int_bits - k >= 1 and fv.frac_bits + k >= 0:
         # x2 = v / 2**k: the same bits, the binary point moved (a free shift)
-        formats["x2"] = QFormat(fv.int_bits - k, fv.frac_bits + k, Rounding.HALF_UP)
+        formats["x2"] = QFormat(fv.int_bits - k, fv.frac_bits + k, Rounding.NEAREST)
     return formats
 
 

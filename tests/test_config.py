@@ -129,7 +129,8 @@ def test_unknown_keys_are_rejected():
     with pytest.raises(ConfigError, match=exactly(
             "config: unknown section(s) modle; expected [filter], [model] and [formats.*]")):
         KalmanConfig.from_dict({"modle": {}})
-    with pytest.raises(ConfigError, match=exactly("formats.x1: rounding must be one of floor, half_up, not 'up'")):
+    with pytest.raises(ConfigError, match=exactly("formats.x1: rounding must be one of nearest, round, convergent, "
+                                                  "floor, fix (half_up: nearest), not 'up'")):
         KalmanConfig.from_dict({"formats": {"x1": {"format": "Q18.8", "rounding": "up"}}})
     with pytest.raises(ConfigError, match=exactly("config: filter.name: no filter named 'kalman9'; registered: kalman2, kalman")):
         KalmanConfig.from_dict({"filter": {"name": "kalman9"}})

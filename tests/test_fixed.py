@@ -1,4 +1,4 @@
-"""The format type and the quantisation rules: pinned by tables, cross-checked with fxpmath."""
+"""The format type and the quantisation rules: pinned by tables, cross-checked with fxpmath and APyTypes."""
 
 import re
 
@@ -26,7 +26,8 @@ def test_format_geometry():
         ({"int_bits": 0, "frac_bits": 3}, "int_bits must be an integer >= 1"),
         ({"int_bits": 2, "frac_bits": -1}, "frac_bits must be an integer >= 0"),
         ({"int_bits": 2.5, "frac_bits": 1}, "int_bits must be an integer"),
-        ({"int_bits": 2, "frac_bits": 1, "rounding": "nearest"}, "rounding must be one of floor, half_up, not 'nearest'"),
+        ({"int_bits": 2, "frac_bits": 1, "rounding": "up"},
+         "rounding must be one of nearest, round, convergent, floor, fix (half_up: nearest), not 'up'"),
         ({"int_bits": 2, "frac_bits": 1, "overflow": "clamp"}, "overflow must be one of saturate, wrap, not 'clamp'"),
     ],
 )
@@ -51,34 +52,52 @@ def test_bits_for():
 
 # -- rounding and overflow tables ----------------------------------------------------------
 
-# (raw, shift, floor, half_up): ties, negative ties, exact negative multiples, odd values
+# (raw, shift, nearest, round, convergent, floor, fix), each worked out by hand from the value
+# raw / 2**shift: ties of both signs, ties to an odd and an even neighbour, exact negative
+# multiples, the most negative and most positive ties
+MODES = ("nearest", "round", "convergent", "floor", "fix")
 ROUNDING_TABLE = [
-    (5, 1, 2, 3),     # 2.5 -> floor 2, half up 3
-    (-5, 1, -3, -2),  # -2.5 -> floor -3, half up -2 (ties toward +inf)
-    (6, 1, 3, 3),     # exact
-    (-6, 1, -3, -3),  # exact negative multiple
-    (-8, 2, -2, -2),  # exact negative multiple
-    (-7, 2, -2, -2),  # -1.75 -> floor -2, half up -2
-    (-6, 2, -2, -1),  # -1.5 tie -> half up -1
-    (-5, 2, -2, -1),  # -1.25 -> half up -1
-    (7, 2, 1, 2),     # 1.75
-    (1, 1, 0, 1),     # 0.5 tie
-    (-1, 1, -1, 0),   # -0.5 tie -> half up 0
-    (-1, 3, -1, 0),   # -0.125
-    (0, 4, 0, 0),
-    (-32768, 4, -2048, -2048),
-    (3, 0, 3, 3),     # no shift
-    (3, -2, 12, 12),  # negative shift appends zeros
+    (5, 1, 3, 3, 2, 2, 2),              # 2.5
+    (-5, 1, -2, -3, -2, -3, -2),        # -2.5
+    (3, 1, 2, 2, 2, 1, 1),              # 1.5: the even neighbour is 2
+    (-3, 1, -1, -2, -2, -2, -1),        # -1.5
+    (10, 2, 3, 3, 2, 2, 2),             # 2.5 with two bits dropped
+    (14, 2, 4, 4, 4, 3, 3),             # 3.5
+    (-14, 2, -3, -4, -4, -4, -3),       # -3.5
+    (6, 1, 3, 3, 3, 3, 3),              # exact
+    (-6, 1, -3, -3, -3, -3, -3),        # exact negative multiple
+    (-8, 2, -2, -2, -2, -2, -2),        # exact negative multiple
+    (-7, 2, -2, -2, -2, -2, -1),        # -1.75
+    (-6, 2, -1, -2, -2, -2, -1),        # -1.5
+    (-5, 2, -1, -1, -1, -2, -1),        # -1.25
+    (-13, 2, -3, -3, -3, -4, -3),       # -3.25
+    (7, 2, 2, 2, 2, 1, 1),              # 1.75
+    (12, 3, 2, 2, 2, 1, 1),             # 1.5 with three bits dropped
+    (-9, 3, -1, -1, -1, -2, -1),        # -1.125
+    (1, 1, 1, 1, 0, 0, 0),              # 0.5
+    (-1, 1, 0, -1, 0, -1, 0),           # -0.5
+    (-1, 3, 0, 0, 0, -1, 0),            # -0.125
+    (0, 4, 0, 0, 0, 0, 0),
+    (-32768, 4, -2048, -2048, -2048, -2048, -2048),
+    (-32760, 4, -2047, -2048, -2048, -2048, -2047),  # -2047.5
+    (32760, 4, 2048, 2048, 2048, 2047, 2047),        # 2047.5
+    (3, 0, 3, 3, 3, 3, 3),              # no shift
+    (3, -2, 12, 12, 12, 12, 12),        # a negative shift appends zeros
 ]
 
 
-@pytest.mark.parametrize(("raw", "shift", "floor", "half_up"), ROUNDING_TABLE)
-def test_rounding_table(raw, shift, floor, half_up):
-    assert shift_round(raw, shift, Rounding.FLOOR) == floor
-    assert shift_round(raw, shift, Rounding.HALF_UP) == half_up
-    arr = np.array([raw], dtype=np.int64)
-    assert shift_round(arr, shift, Rounding.FLOOR)[0] == floor
-    assert shift_round(arr, shift, Rounding.HALF_UP)[0] == half_up
+@pytest.mark.parametrize(("raw", "shift", *MODES), ROUNDING_TABLE)
+def test_rounding_table(raw, shift, nearest, round, convergent, floor, fix):
+    for mode, expected in zip(MODES, (nearest, round, convergent, floor, fix), strict=True):
+        assert shift_round(raw, shift, Rounding(mode)) == expected, mode
+        arr = np.array([raw, raw], dtype=np.int64)
+        assert shift_round(arr, shift, Rounding(mode)).tolist() == [expected, expected], mode
+
+
+def test_half_up_is_another_name_of_nearest():
+    assert Rounding("half_up") is Rounding.NEAREST is Rounding.HALF_UP
+    assert QFormat(4, 2, "half_up") == QFormat(4, 2, "nearest")
+    assert [r.value for r in Rounding] == list(MODES)
 
 
 Q4_0 = QFormat(4, 0)  # -8..7
@@ -127,22 +146,34 @@ def test_to_raw_rounds_constants():
 
 # -- cross-check against fxpmath on random values -------------------------------------------
 
-@pytest.mark.parametrize("overflow", ["saturate", "wrap"])
-@pytest.mark.parametrize("rounding", ["floor", "half_up"])
-def test_requantize_matches_fxpmath(rounding, overflow, seed):
-    rng = np.random.default_rng(seed)
-    count = 5000
-    for _ in range(20):
+# fxpmath's rules for ours: 'floor', 'fix' (toward zero) and 'around' (numpy's, ties to even);
+# nearest is floor after adding half an LSB of the target; round (ties away) fxpmath lacks
+FXPMATH = {"floor": ("floor", False), "fix": ("fix", False), "convergent": ("around", False),
+           "nearest": ("floor", True)}
+APYTYPES = {"floor": "TO_NEG", "nearest": "TIES_POS", "round": "TIES_AWAY", "convergent": "TIES_EVEN",
+            "fix": "TO_ZERO"}
+
+
+def random_requantisations(rng, rounding, overflow, count=5000, cases=20):
+    """``(raw, src_frac, fmt)``: exact binary fractions well beyond the format's range, both signs,
+    many ties."""
+    for _ in range(cases):
         src_frac = int(rng.integers(0, 12))
         fmt = QFormat(int(rng.integers(1, 10)), int(rng.integers(0, 8)), rounding, overflow)
-        # exact binary fractions well beyond the format's range, both signs, many ties
-        raw = rng.integers(-(1 << (fmt.width + src_frac - fmt.frac_bits + 2)),
-                           1 << (fmt.width + src_frac - fmt.frac_bits + 2), count)
+        span = 1 << (fmt.width + src_frac - fmt.frac_bits + 2)
+        yield rng.integers(-span, span, count), src_frac, fmt
+
+
+@pytest.mark.parametrize("overflow", ["saturate", "wrap"])
+@pytest.mark.parametrize("rounding", sorted(FXPMATH))
+def test_requantize_matches_fxpmath(rounding, overflow, seed):
+    rng = np.random.default_rng(seed)
+    mode, add_half = FXPMATH[rounding]
+    for raw, src_frac, fmt in random_requantisations(rng, rounding, overflow):
         values = raw.astype(np.float64) * 2.0 ** -src_frac
         ours, flags = requantize(raw.astype(np.int64), src_frac, fmt)
-        # fxpmath floors; half up is floor after adding half an LSB of the target format
-        shifted = values + (fmt.lsb / 2 if rounding == "half_up" and src_frac > fmt.frac_bits else 0.0)
-        ref = Fxp(shifted, signed=True, n_word=fmt.width, n_frac=fmt.frac_bits, rounding="floor", overflow=overflow)
+        shifted = values + (fmt.lsb / 2 if add_half and src_frac > fmt.frac_bits else 0.0)
+        ref = Fxp(shifted, signed=True, n_word=fmt.width, n_frac=fmt.frac_bits, rounding=mode, overflow=overflow)
         np.testing.assert_array_equal(ours, ref.val.astype(np.int64), err_msg=f"{fmt} from frac {src_frac}")
         # the flag is raised exactly when the rounded value left the range
         rounded = shift_round(raw.astype(object), src_frac - fmt.frac_bits, fmt.rounding)
@@ -151,6 +182,24 @@ def test_requantize_matches_fxpmath(rounding, overflow, seed):
         # the int path agrees with the array path
         for r, o, fl in zip(raw[:300].tolist(), ours[:300].tolist(), flags[:300].tolist(), strict=True):
             assert requantize(r, src_frac, fmt) == (o, fl)
+
+
+@pytest.mark.parametrize("overflow", ["saturate", "wrap"])
+@pytest.mark.parametrize("rounding", MODES)
+def test_requantize_matches_apytypes(rounding, overflow, seed):
+    apy = pytest.importorskip("apytypes")
+    rng = np.random.default_rng(seed)
+    quantization = getattr(apy.QuantizationMode, APYTYPES[rounding])
+    wrap = {"saturate": apy.OverflowMode.SAT, "wrap": apy.OverflowMode.WRAP}[overflow]
+    for raw, src_frac, fmt in random_requantisations(rng, rounding, overflow, count=2000):
+        width = int(np.max(np.abs(raw))).bit_length() + 2
+        src = apy.APyFixedArray.from_float(raw.astype(np.float64) * 2.0 ** -src_frac, int_bits=width - src_frac,
+                                           frac_bits=src_frac)
+        bits = np.asarray(src.cast(int_bits=fmt.int_bits, frac_bits=fmt.frac_bits, quantization=quantization,
+                                   overflow=wrap).to_bits()).astype(np.int64)
+        ref = bits - ((bits >> (fmt.width - 1)) << fmt.width)  # two's complement back to signed
+        ours, _ = requantize(raw.astype(np.int64), src_frac, fmt)
+        np.testing.assert_array_equal(ours, ref, err_msg=f"{rounding} {fmt} from frac {src_frac}")
 
 
 def test_to_raw_matches_fxpmath_on_floats(seed):

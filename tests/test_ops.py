@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from amaranth import Module, Signal, signed
 from amaranth.sim import Simulator
-from test_fixed import OVERFLOW_TABLE, ROUNDING_TABLE
+from test_fixed import MODES, OVERFLOW_TABLE, ROUNDING_TABLE
 
 from kfpga.compiled import compile_stage
 from kfpga.fixed import QFormat
@@ -86,9 +86,9 @@ def amaranth_run(stage, raws, src):
     return out
 
 
-@pytest.mark.parametrize(("raw", "shift", "floor", "half_up"), ROUNDING_TABLE)
-def test_rounding_table_on_every_backend(raw, shift, floor, half_up):
-    for rounding, expected in (("floor", floor), ("half_up", half_up)):
+@pytest.mark.parametrize(("raw", "shift", *MODES), ROUNDING_TABLE)
+def test_rounding_table_on_every_backend(raw, shift, nearest, round, convergent, floor, fix):
+    for rounding, expected in zip(MODES, (nearest, round, convergent, floor, fix), strict=True):
         src = QFormat(24, max(shift, 0) + 2)
         fmt = QFormat(24, src.frac_bits - shift, rounding)
         results = run_backends(one_write(fmt), [raw], src)

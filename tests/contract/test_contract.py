@@ -21,13 +21,15 @@ import pytest
 from kfpga import registry
 from kfpga.ads8364 import CODE_MAX, CODE_MIN
 from kfpga.config import ConfigError, FilterConfig
-from kfpga.fixed import QFormat
+from kfpga.fixed import QFormat, Rounding
 from kfpga.fixedmodel import FixedModel
 from kfpga.formats import MULTIPLIER_BITS
 from kfpga.hw.generate import write_block
 from kfpga.sim.amaranth_streams import measure_timing, run_core
 from kfpga.sim.runner import SIMULATORS, build, run
 from kfpga.tools import iverilog_parse, iverilog_path, simulator_available, verilator_lint
+
+ROUNDINGS = [r.value for r in Rounding]
 
 CASES = [pytest.param(spec.name, variant, id=f"{spec.name}-{variant}")
          for spec in registry.specs() for variant in spec.variants]
@@ -52,12 +54,12 @@ def random_config(spec, variant, rng):
             if point.operand:
                 i = min(i, MULTIPLIER_BITS)
                 f = min(f, MULTIPLIER_BITS - i)
-            formats[name] = QFormat(i, f, str(rng.choice(["floor", "half_up"])),
+            formats[name] = QFormat(i, f, str(rng.choice(ROUNDINGS)),
                                     str(rng.choice(["saturate", "saturate", "wrap"])))
         for name in base.formats:
             same = spec.points[name].same_as
             if same is not None:
-                formats[name] = formats[same].with_rules(rounding=str(rng.choice(["floor", "half_up"])))
+                formats[name] = formats[same].with_rules(rounding=str(rng.choice(ROUNDINGS)))
         try:
             return FilterConfig(filter=spec.name, params=params, formats=formats, check_ranges=False)
         except ConfigError:
