@@ -10,7 +10,14 @@ from kfpga.config import FilterConfig, analysed_ranges, default_formats
 from kfpga.fixedmodel import FixedModel
 from kfpga.formats import MAX_OPERAND_BITS
 
-__all__ = ["sample_count", "rmse", "sqnr_db", "float_run", "Comparison", "compare", "sweep", "plot_compare", "plot_sweep"]
+__all__ = ["sample_count", "rmse", "sqnr_db", "float_run", "Comparison", "compare", "limit_cycles", "sweep",
+           "plot_compare", "plot_sweep"]
+
+#: The noise-free inputs of the limit-cycle check: (name, level before, level after, step at)
+LIMIT_CYCLE_INPUTS = (("constant +10000", 10000, 10000, 0), ("constant -3001", -3001, -3001, 0),
+                      ("step 0 -> 10000", 0, 10000, 1000))
+LIMIT_CYCLE_SAMPLES = 8000
+LIMIT_CYCLE_WINDOW = 2000  # the last samples, after settling
 
 
 def rmse(estimate, truth):
@@ -46,13 +53,15 @@ class Comparison:
     extra: dict = field(default_factory=dict)
 
 
-def compare(config, variant, y, truth=None, *, settle=None, seed=None, scenario=None):
+def compare(config, variant, y, truth=None, *, settle=None, seed=None, scenario=None, limit_cycle=True):
     """Run the float and the bit-accurate filter on the same codes ``y`` and measure them.
 
     The RMSE figures are of the filter's main output (its ``default_output``, x1 for the
     paper's filter) against ``truth`` and skip the first ``settle`` samples (default: 100, or a
     tenth of short runs), where both filters are still converging; the other figures use every
-    sample. ``fields`` gives the fixed - float difference of every output.
+    sample. ``fields`` gives the fixed - float difference of every output; ``overflow_points``
+    the samples that overflowed at each quantisation point; ``limit_cycle_lsb`` and
+    ``dead_band_lsb`` come from :func:`limit_cycles` (skipped with ``limit_cycle=False``).
     """
     codes = {k: np.asarray(v, dtype=np.int64) for k, v in y.items()} if isinstance(y, dict) else None
     y = codes if codes is not None else np.asarray(y, dtype=np.int64)
@@ -96,13 +105,49 @@ def compare(config, variant, y, truth=None, *, settle=None, seed=None, scenario=
         "sqnr_db": fields[main]["sqnr_db"],
         "overflows": int(np.count_nonzero(res.overflow)),
         "overflow_sites": {name: int(np.count_nonzero(f)) for name, f in res.overflow_sites.items() if f.any()},
+        "overflow_points": {name: int(np.count_nonzero(f)) for name, f in res.overflow_points.items()},
         "x1_format": str(model.output_format(main)),
         "fields": fields,
         "formats": {name: str(fmt) for name, fmt in config.formats.items()},
     }
     if truth is not None and metrics["rmse_float"] > 0:
         metrics["rmse_fixed_over_float"] = metrics["rmse_fixed"] / metrics["rmse_float"]
+    if limit_cycle:
+        lc = limit_cycles(config, variant)
+        metrics.update(limit_cycle_lsb=lc["limit_cycle_lsb"], dead_band_lsb=lc["dead_band_lsb"], limit_cycle=lc)
     return Comparison(metrics, raw, truth, flx1, fx1, lsb, settle, main)
+
+
+def limit_cycles(config, variant, *, samples=LIMIT_CYCLE_SAMPLES, window=LIMIT_CYCLE_WINDOW):
+    """Dead band and limit cycles of the fixed filter on noise-free inputs (:data:`LIMIT_CYCLE_INPUTS`).
+
+    The input that observes the main output (or the first) gets the level, any other input 0.
+    Over the last ``window`` samples, where the float filter has settled, the fixed main output
+    minus the float one is measured in input LSBs (ADC codes): the **dead band** is the largest
+    offset it keeps (its median, in magnitude), the **limit cycle** its peak-to-peak swing. A
+    filter without either gives 0 and 0. ``fields`` gives each output's largest |fixed - float| in
+    the window, in its own units (a rate stuck off zero shows there).
+    """
+    model = FixedModel(config, variant=variant)
+    main = config.spec.default_output
+    names = config.inputs
+    driven = config.spec.measured_input(config.params) or names[0]
+    k = np.arange(samples)
+    w = slice(samples - window, None)
+    levels = np.stack([np.where(k < at, before, after) for _, before, after, at in LIMIT_CYCLE_INPUTS]).astype(np.int64)
+    codes = levels if len(names) == 1 else {n: levels if n == driven else np.zeros_like(levels) for n in names}
+    fixed = model.to_float(model.run(codes))  # all inputs at once on the batched model
+    per_input, dead, cycle = {}, 0.0, 0.0
+    for i, (label, *_rest) in enumerate(LIMIT_CYCLE_INPUTS):
+        y = levels[i] if len(names) == 1 else {n: c[i] for n, c in codes.items()}
+        flt = float_run(config, variant, y)
+        diff = fixed[main][i][w] - flt[main][w]
+        entry = {"dead_band_lsb": float(abs(np.median(diff))), "limit_cycle_lsb": float(np.ptp(diff)),
+                 "fields": {name: float(np.max(np.abs(fixed[name][i][w] - flt[name][w]))) for name in model.outputs}}
+        per_input[label] = entry
+        dead, cycle = max(dead, entry["dead_band_lsb"]), max(cycle, entry["limit_cycle_lsb"])
+    return {"dead_band_lsb": dead, "limit_cycle_lsb": cycle, "inputs": per_input, "field": main,
+            "samples": samples, "window": window}
 
 
 def sweep_config(params, width, ranges):

@@ -264,8 +264,11 @@ def _run_compare(args):
     for name, fm in m["fields"].items():
         print(f"    {name:<8} {fm['format']:>8}   {fm['max_abs_fixed_minus_float_lsb']:8.1f} LSB "
               f"({fm['max_abs_fixed_minus_float']:.4g})   {fm['sqnr_db']:6.1f} dB")
-    where = ", ".join(f"{k} {v}" for k, v in m["overflow_sites"].items())
-    print(f"  overflows                  {m['overflows']} sample(s)" + (f" ({where})" if where else ""))
+    where = ", ".join(f"{k} {v}" for k, v in m["overflow_points"].items() if v)
+    print(f"  overflows                  {m['overflows']} sample(s)" + (f" (at {where})" if where else ""))
+    lc = m["limit_cycle"]
+    print(f"  noise-free inputs          dead band {lc['dead_band_lsb']:.3g} LSB, limit cycle {lc['limit_cycle_lsb']:.3g} LSB "
+          f"peak to peak ({field} - float over the last {lc['window']} of {lc['samples']} samples; input LSB = 1 code)")
     if args.plot:
         print(f"  plot: {args.plot}")
     return 0

@@ -194,6 +194,7 @@ class Kernel:
     inputs: tuple  # input names
     outputs: tuple  # output names
     sites: tuple  # names of the writes that can overflow, in flag order
+    site_points: dict  # each site's quantisation point
 
 
 def compile_stage(update, formats, *, constants, state, inputs, outputs, vector):
@@ -239,7 +240,8 @@ def compile_stage(update, formats, *, constants, state, inputs, outputs, vector)
     source = "\n".join(lines) + "\n"
     namespace = {"np": np, "divide": divide}
     exec(compile(source, f"<kfpga stage {update.__name__}>", "exec"), namespace)
-    return Kernel(source, namespace["kernel"], state_names, input_names, tuple(outputs), sites)
+    return Kernel(source, namespace["kernel"], state_names, input_names, tuple(outputs), sites,
+                  {name: ops.point_of[name] for name in sites})
 
 
 class FloatTraceOps(TraceOps):

@@ -9,7 +9,7 @@ exact rationals (:class:`~kfpga.ops.FractionOps`); the tests hold all of them eq
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType
 
 import numpy as np
@@ -42,7 +42,8 @@ class ModelResult:
 
     ``outputs`` maps each output field to its raw integers, in its point's format;
     ``overflow`` is the per-sample flag, ``sticky`` its running OR (from the state's sticky
-    flag on), and ``overflow_sites`` the per-sample flag of each write that can overflow.
+    flag on), ``overflow_sites`` the per-sample flag of each write that can overflow, and
+    ``overflow_points`` the same per quantisation point (the OR of the writes into it).
     Output fields also read as attributes (``result.x1``).
     """
 
@@ -51,6 +52,7 @@ class ModelResult:
     sticky: np.ndarray
     state: ModelState
     overflow_sites: MappingProxyType
+    overflow_points: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
 
     def __getattr__(self, name):
         try:
@@ -169,8 +171,12 @@ class FixedModel:
             arrays = [np.moveaxis(a, 0, -1) for a in arrays]
             overflow, sticky = np.moveaxis(overflow, 0, -1), np.moveaxis(sticky, 0, -1)
             site_flags = {name: np.moveaxis(f, 0, -1) for name, f in site_flags.items()}
+        point_flags = {}
+        for name, f in site_flags.items():
+            point = k.site_points[name]
+            point_flags[point] = point_flags[point] | f if point in point_flags else f
         return ModelResult(MappingProxyType(dict(zip(self.outputs, arrays, strict=True))), overflow, sticky, end,
-                           MappingProxyType(site_flags))
+                           MappingProxyType(site_flags), MappingProxyType(point_flags))
 
     def run_ops(self, y, state=None):
         """The same as :meth:`run`, through :class:`~kfpga.ops.IntOps` one sample at a time (slow)."""

@@ -92,6 +92,7 @@ class Ops:
     def __init__(self, formats):
         self.formats = formats
         self.flags = []  # (name, flag payload) of every rq and div, in order
+        self.point_of = {}  # name of every rq and div -> its point (the format's text for a bare format)
 
     # -- values -------------------------------------------------------------------------
     def fmt(self, point):
@@ -178,6 +179,7 @@ class Ops:
         """Write ``a`` into the format of ``point``: its rounding, its overflow rule, a flag."""
         fmt = self.fmt(point)
         name = name or _label(point)
+        self.point_of[name] = point if isinstance(point, str) else str(point)
         raw, flag = self._rq(a.raw, a.frac, fmt, name)
         self.flags.append((name, flag))
         return Fx(raw, fmt.frac_bits, None, fmt, name)
@@ -188,6 +190,7 @@ class Ops:
         ``num`` (truncation toward zero)."""
         fmt = self.fmt(point)
         name = name or _label(point)
+        self.point_of[name] = point if isinstance(point, str) else str(point)
         shift = divider_shift(num.frac, den.frac, fmt.frac_bits)
         if shift < 0:
             raise ValueError(
