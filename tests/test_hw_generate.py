@@ -17,7 +17,7 @@ DESIGNS = [("steady", False), ("full", False), ("steady", True), ("full", True)]
 def top_verilog(request, tmp_path_factory):
     variant, six = request.param
     out = tmp_path_factory.mktemp(f"gen_{variant}_{six}")
-    path, top = write_top(out, FilterConfig(), variant=variant, six_channel=six, channel=3)
+    path, top = write_top(out, FilterConfig(), variant=variant, six_channel=six, channel=None if six else 3)
     return path, top
 
 
