@@ -161,38 +161,38 @@ def sample_count(y):
     return len(next(iter(y.values()))) if isinstance(y, dict) else len(y)
 
 
-def sweep(params, variant, y, truth, widths, *, settle=None, range_source="scenario", progress=None):
-    """Fixed-point error for each operand width; rows of metrics, narrowest good width marked.
+def sweep(params, variant, y, truth, widths, *, settle=None, range_source="scenario", budget=0.01, progress=None):
+    """Fixed-point error for each operand width: ``(rows, narrowest)``.
 
     ``range_source`` picks the float run the integer bits come from: the swept signal itself
-    (``"scenario"``) or the full-scale stimulus (``"full-scale"``).
+    (``"scenario"``) or the full-scale stimulus (``"full-scale"``). Each row gives the formats
+    every point actually got; it ``passes`` when the fixed RMSE is within ``budget`` of float's
+    either way (a fixed filter far better than float is not the float filter either).
+    ``narrowest`` is the narrowest width from which every wider one in ``widths`` passes.
     """
     ranges = analysed_ranges(params, y if range_source == "scenario" else None)
     rows = []
     iterator = progress(widths) if progress else widths
     for width in iterator:
         cfg = sweep_config(params, width, ranges)
-        cmp_ = compare(cfg, variant, y, truth, settle=settle)
-        m = cmp_.metrics
+        m = compare(cfg, variant, y, truth, settle=settle, limit_cycle=False).metrics
+        ratio = m["rmse_fixed_over_float"]
         rows.append({
             "bits": width,
-            "x1_format": m["x1_format"],
-            "e_format": m["formats"].get("e"),
+            "formats": m["formats"],
             "rmse_float": m["rmse_float"],
             "rmse_fixed": m["rmse_fixed"],
-            "rmse_fixed_over_float": m["rmse_fixed_over_float"],
+            "rmse_fixed_over_float": ratio,
+            "passes": ratio is not None and abs(ratio - 1.0) <= budget and m["overflows"] == 0,
             "sqnr_db": m["sqnr_db"],
             "max_abs_fixed_minus_float": m["max_abs_fixed_minus_float"],
             "overflows": m["overflows"],
         })
-    good = [r["bits"] for r in rows if r["rmse_fixed_over_float"] is not None and r["rmse_fixed_over_float"] <= 1.01]
-    # the narrowest width from which every wider width is also within 1 %
     narrowest = None
-    for r in reversed(rows):
-        if r["bits"] in good:
-            narrowest = r["bits"]
-        else:
+    for r in sorted(rows, key=lambda r: -r["bits"]):
+        if not r["passes"]:
             break
+        narrowest = r["bits"]
     return rows, narrowest
 
 
@@ -257,19 +257,29 @@ def plot_compare(cmp_, path, title=""):
     plt.close(fig)
 
 
-def plot_sweep(rows, narrowest, path, title=""):
-    """RMSE and SQNR against operand width, the narrowest good width marked."""
+def plot_sweep(rows, narrowest, path, title="", budget=0.01):
+    """RMSE and SQNR against operand width: the budget band, the narrowest passing width and the
+    width of one embedded multiplier marked."""
+    from kfpga.formats import MULTIPLIER_BITS
+
     plt = _pyplot()
     bits = [r["bits"] for r in rows]
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 7), sharex=True, constrained_layout=True)
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 7), sharex=True, constrained_layout=True)
+    flt = np.array([r["rmse_float"] for r in rows])
     ax1.plot(bits, [r["rmse_fixed"] for r in rows], "o-", color="tab:red", label="fixed")
-    ax1.plot(bits, [r["rmse_float"] for r in rows], "-", color="tab:blue", label="float")
-    ax1.plot(bits, [1.01 * r["rmse_float"] for r in rows], ":", color="tab:blue", label="float + 1 %")
-    if narrowest is not None:
-        ax1.axvline(narrowest, color="tab:green", ls="--", label=f"narrowest within 1 %: {narrowest} bits")
+    ax1.plot(bits, flt, "-", color="tab:blue", label="float")
+    ax1.fill_between(bits, (1 - budget) * flt, (1 + budget) * flt, color="tab:blue", alpha=0.15,
+                     label=f"float ± {100 * budget:g} %")
+    for ax in (ax1, ax2):
+        if bits[0] <= MULTIPLIER_BITS <= bits[-1]:
+            ax.axvline(MULTIPLIER_BITS, color="0.3", ls=":", lw=1.0,
+                       label=f"{MULTIPLIER_BITS} bits: one embedded multiplier per product" if ax is ax1 else None)
+        if narrowest is not None:
+            ax.axvline(narrowest, color="tab:green", ls="--",
+                       label=f"narrowest within {100 * budget:g} % from there up: {narrowest} bits" if ax is ax1 else None)
     ax1.set_ylabel("RMSE vs truth (codes)")
     ax1.legend(fontsize=8)
-    ax1.set_title(title)
+    ax1.set_title(title, fontsize=9)
     ax2.plot(bits, [r["sqnr_db"] for r in rows], "o-", color="tab:purple")
     ax2.set_ylabel("SQNR fixed vs float (dB)")
     ax2.set_xlabel("multiplier operand width (bits)")

@@ -47,6 +47,18 @@ def _bit_range(text):
     return list(range(lo, hi + 1))
 
 
+def _budget(text):
+    """``--budget``: a share of the float RMSE, written ``1%`` or ``1`` (percent), in (0, 100]."""
+    value = text.strip().removesuffix("%").strip()
+    try:
+        pct = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a percentage like 1% or 0.5%, not {text!r}") from None
+    if not 0 < pct <= 100:
+        raise argparse.ArgumentTypeError(f"must be more than 0 % and at most 100 %, not {text!r}")
+    return pct / 100.0
+
+
 def _load_config(args, *, hardware=False):
     """The config of ``--config`` and ``--filter`` (which must agree), with ``--variant`` checked
     (``hardware``: and refused when it has no core for this model)."""
@@ -291,26 +303,38 @@ def _run_sweep(args):
     truth, y, label = _samples_for(args, config, command="sweep", need_truth=True)
     rows, narrowest = sweep(
         config.params, args.variant, y, truth, args.bits, settle=args.settle, range_source=args.ranges,
+        budget=args.budget,
         progress=lambda it: tqdm(it, desc="sweep", unit="width", file=sys.stderr, disable=args.quiet),
     )
     plot = args.plot
     if plot is None:  # the default goes under ./build, which is made for it
         Path("build").mkdir(exist_ok=True)
         plot = f"build/sweep_{args.variant}.png"
-    plot_sweep(rows, narrowest, plot, title=f"kfpga sweep: {args.variant} variant, {label}, {sample_count(y)} samples")
+    seed = f", seed {args.seed}" if args.seed is not None and not args.input else ""
+    title = (f"kfpga sweep: {config.filter} {args.variant}, {label}, {sample_count(y)} samples{seed}, "
+             f"integer bits from the {args.ranges} range")
+    plot_sweep(rows, narrowest, plot, title=title, budget=args.budget)
+    pct = f"{100 * args.budget:g} %"
     if args.json:
-        _emit_json({"variant": args.variant, "samples": sample_count(y), "seed": args.seed, "ranges": args.ranges,
-                    "narrowest_within_1pct": narrowest, "rows": rows, "plot": plot})
+        _emit_json({"filter": config.filter, "variant": args.variant, "samples": sample_count(y), "seed": args.seed,
+                    "ranges": args.ranges, "budget": args.budget, "narrowest_within_budget": narrowest,
+                    "rows": rows, "plot": plot})
         return 0
-    print(f"kfpga sweep: {args.variant} variant, {label}, {sample_count(y)} samples; integer bits from the {args.ranges} range")
-    print(f"{'bits':>4}  {'output':>7}  {'e':>7}  {'RMSE fixed':>10}  {'vs float':>9}  {'SQNR dB':>8}  {'overflows':>9}")
+    print(title)
+    print(f"{'bits':>4}  {'RMSE fixed':>10}  {'vs float':>9}  {'SQNR dB':>8}  {'overflows':>9}  within {pct}")
     for r in rows:
-        mark = " *" if r["bits"] == narrowest else ""
-        print(f"{r['bits']:>4}  {r['x1_format']:>7}  {r['e_format'] or '-':>7}  {r['rmse_fixed']:10.4f}  "
-              f"{100 * (r['rmse_fixed_over_float'] - 1):+8.3f}%  {r['sqnr_db']:8.1f}  {r['overflows']:>9}{mark}")
+        mark = "  * narrowest" if r["bits"] == narrowest else ""
+        print(f"{r['bits']:>4}  {r['rmse_fixed']:10.4f}  {100 * (r['rmse_fixed_over_float'] - 1):+8.3f}%  "
+              f"{r['sqnr_db']:8.1f}  {r['overflows']:>9}  {'yes' if r['passes'] else 'no'}{mark}")
+    # the formats each width gave, point by point (a point the width does not reach keeps its own)
+    points = list(rows[0]["formats"])
+    print("formats used, per point (operand width N: multiplier operands N bits, registers N - 10 fraction bits):")
+    print(f"  {'point':<6}" + "".join(f"{r['bits']:>8}" for r in rows))
+    for name in points:
+        print(f"  {name:<6}" + "".join(f"{r['formats'][name]:>8}" for r in rows))
     print(f"float RMSE {rows[0]['rmse_float']:.4f}; "
-          + (f"* narrowest width within 1 % of float from there up: {narrowest} bits" if narrowest
-             else "no width in the range is within 1 % of float"))
+          + (f"narrowest width from which every wider one is within {pct} of float (better or worse): {narrowest} bits"
+             if narrowest else f"no width in the range is within {pct} of float from there up"))
     print(f"plot: {plot}")
     return 0
 
@@ -757,12 +781,17 @@ def build_parser():
 
     p = sub.add_parser("sweep", help="fixed-point error against word length, as a table and a PNG",
                        description="Rerun the comparison with every multiplier operand N bits wide (and N-10 fraction "
-                                   "bits in the state registers) for each N in --bits, and mark the narrowest width "
-                                   "from which the fixed RMSE stays within 1 % of float. The plot goes to "
-                                   "build/sweep_VARIANT.png in the current folder unless --plot says otherwise.")
+                                   "bits in the state registers) for each N in --bits; print the formats each point "
+                                   "got, and mark the narrowest width from which every wider one keeps the fixed RMSE "
+                                   "within --budget of float (a fixed RMSE further below float than the budget fails "
+                                   "too: it is not the float filter's). The plot marks the 18-bit multiplier width "
+                                   "and goes to build/sweep_VARIANT.png in the current folder unless --plot says "
+                                   "otherwise.")
     _add_signal_args(p)
     p.add_argument("--bits", type=_bit_range, default=list(range(10, 25)), metavar="A:B",
                    help="operand widths to try, inclusive (default: 10:24)")
+    p.add_argument("--budget", type=_budget, default=0.01, metavar="PCT",
+                   help="how far the fixed RMSE may be from float's, either way (default: 1%%)")
     p.add_argument("--ranges", choices=("scenario", "full-scale"), default="scenario",
                    help="where integer bits come from: the swept signal's own float run, or the full 16-bit "
                         "input range (default: scenario)")

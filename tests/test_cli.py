@@ -136,16 +136,25 @@ def test_sweep_table_png_and_narrowest(capsys, tmp_path):
     assert code == 0
     res = json.loads(out)
     rows = res["rows"]
-    assert [r["bits"] for r in rows] == list(range(9, 17))
-    narrowest = res["narrowest_within_1pct"]
+    assert [r["bits"] for r in rows] == list(range(9, 17)) and res["budget"] == 0.01
+    for r in rows:  # within the budget either way, nothing overflowed
+        assert r["passes"] == (abs(r["rmse_fixed"] / r["rmse_float"] - 1) <= 0.01 and r["overflows"] == 0), r
+    narrowest = res["narrowest_within_budget"]
     assert narrowest is not None
-    for r in rows:
-        within = r["rmse_fixed"] <= 1.01 * r["rmse_float"]
-        if r["bits"] >= narrowest:
-            assert within
+    assert all(r["passes"] for r in rows if r["bits"] >= narrowest)
     below = [r for r in rows if r["bits"] == narrowest - 1]
-    assert not below or below[0]["rmse_fixed"] > 1.01 * below[0]["rmse_float"]
+    assert not below or not below[0]["passes"]
+    # the formats actually used: the operand e follows the width, the gain is N bits
+    assert [r["formats"]["gain"] for r in rows] == [f"Q2.{n - 2}" for n in range(9, 17)]
+    assert len({r["formats"]["e"] for r in rows}) == len(rows)
     assert png.stat().st_size > 1000
+    # the answer does not depend on how far the range reaches below it
+    code, out, _ = run_cli(capsys, "sweep", "--bits", f"{narrowest}:16", "--samples", "4000", "--seed", "2", "--json",
+                           "--plot", str(png), "--quiet")
+    assert json.loads(out)["narrowest_within_budget"] == narrowest
+    code, out, _ = run_cli(capsys, "sweep", "--bits", "9:16", "--samples", "4000", "--seed", "2", "--budget", "50%",
+                           "--json", "--plot", str(png), "--quiet")
+    assert json.loads(out)["narrowest_within_budget"] == 9
 
 
 def test_formats_table_and_toml(capsys, tmp_path):

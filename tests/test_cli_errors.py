@@ -121,6 +121,8 @@ CASES = [
      "model.Q = 0.0: the steady-state variant needs Q > 0 (Q = 0 gives K_inf = 0)"),
     ("argparse-samples", ["compare", "--samples", "-3"], {}, "argument --samples: must be a positive integer, not '-3'"),
     ("argparse-choice", ["simulate", "--simulator", "modelsim"], {}, None),
+    ("sweep-budget-zero", ["sweep", "--budget", "0%"], {}, "argument --budget: must be more than 0 % and at most 100 %, not '0%'"),
+    ("sweep-budget-text", ["sweep", "--budget", "one"], {}, "argument --budget: must be a percentage like 1% or 0.5%, not 'one'"),
     ("argparse-unknown", ["filters", "--verbose"], {}, "kfpga filters: error: unrecognized arguments: --verbose"),
 ]
 
