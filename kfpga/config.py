@@ -22,7 +22,7 @@ import numpy as np
 
 from kfpga.errors import ConfigError
 from kfpga.fixed import INT64_SAFE_BITS, QFormat, bits_for, to_raw
-from kfpga.formats import MAX_OPERAND_BITS, MULTIPLIER_BITS, STATE_FRAC_BITS
+from kfpga.formats import MAX_OPERAND_BITS, MULTIPLIER_BITS, PRECISION, STATE_FRAC_BITS, precision_frac_bits
 from kfpga.ops import WidthOps
 from kfpga.spec import Constant
 
@@ -245,6 +245,32 @@ class FilterConfig:
         why = spec.variants[variant].applies(self.params)
         if why:
             raise ConfigError(why)
+        if self.check_ranges:
+            self._check_precision(variant)
+
+    def _check_precision(self, variant):
+        """Refuse a constant or reset value that its format holds as 0, or more than
+        :data:`PRECISION` off: the model would compute with another filter than the one asked for."""
+        v = self.spec.variants[variant]
+        values = [(c.label or name, c.value, c.point) for name, c in self.constants(variant).items()
+                  if isinstance(c, Constant)]
+        points = dict(v.state_for(self.params))
+        values += [(f"the reset value of {name}", value, points[name]) for name, value in v.initial(self.params).items()]
+        for label, value, point in values:
+            if value == 0 or not isinstance(point, str):
+                continue  # exact (a structural format is made for its value)
+            fmt = self.formats[point]
+            raw, _ = to_raw(value, fmt)
+            held = raw * fmt.lsb
+            error = abs(held - value) / abs(value)
+            if raw != 0 and error <= PRECISION:
+                continue
+            need = precision_frac_bits(value, fmt.rounding)
+            what = label if label.startswith("the reset") else "the constant " + label
+            how = (f"rounds to 0 in formats.{point} = {fmt} (LSB {fmt.lsb:.3g})" if raw == 0 else
+                   f"is held as {held:.4g} in formats.{point} = {fmt}, {100 * error:.2g} % off")
+            raise ConfigError(f"{what} = {value:.4g} {how}: {point} needs at least {need} fraction bits to hold it "
+                              f"within {100 * PRECISION:g} % ({variant} variant)")
 
     def require_hardware(self, variant):
         """Refuse a variant that has no core for these parameters (it may still run as a model)."""

@@ -19,10 +19,11 @@ __all__ = ["Point", "Output", "Variant", "FilterSpec", "Constant"]
 
 class Constant(NamedTuple):
     """A constant of an update: a real value, quantised once into the format of ``point`` (a point
-    name or a :class:`~kfpga.fixed.QFormat`)."""
+    name or a :class:`~kfpga.fixed.QFormat`); ``label`` names it in messages (``T^2*Q``)."""
 
     value: float
     point: object
+    label: str | None = None
 
 
 @dataclass(frozen=True)

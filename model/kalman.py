@@ -37,7 +37,7 @@ import numpy as np
 
 from kfpga.errors import ConfigError
 from kfpga.fixed import QFormat
-from kfpga.formats import register_formats
+from kfpga.formats import noise_frac_bits, register_formats
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
 from kfpga.params import matrix, number
 from kfpga.spec import Constant, FilterSpec, Output, Point, Variant
@@ -460,7 +460,7 @@ def _matrix_constants(params):
     for i, row in enumerate(params.F):
         for j, v in enumerate(row):
             if v != 0:
-                out[f"F{i}{j}"] = Constant(v, exact_format(v) if free(v) else "f")
+                out[f"F{i}{j}"] = Constant(v, exact_format(v) if free(v) else "f", f"F[{i}][{j}]")
                 flags[f"F{i}{j}"] = free(v)
     for j, row in enumerate(params.H):
         for i, v in enumerate(row):
@@ -481,7 +481,7 @@ def _steady_constants(params):
     gain = steady_gain(params)
     for i in range(params.n):
         for j in range(params.m):
-            consts[f"K{i}{j}"] = Constant(float(gain[i][j]), f"k{i + 1}")
+            consts[f"K{i}{j}"] = Constant(float(gain[i][j]), f"k{i + 1}", f"K[{i}][{j}]")
     return {**consts, "free": flags, **_structure(params)}
 
 
@@ -492,10 +492,10 @@ def _full_constants(params):
     for i in range(n):
         for j in range(i, n):
             if gqg[i][j] != 0:
-                consts[f"GQG{i}{j}"] = Constant(float(gqg[i][j]), f"pl{i + 1}{j + 1}")
+                consts[f"GQG{i}{j}"] = Constant(float(gqg[i][j]), f"pl{i + 1}{j + 1}", f"(G Q G^T)[{i}][{j}]")
     for a in range(m):
         for b in range(a, m):
-            consts[f"R{a}{b}"] = Constant(float(r[a][b]), "s" if m == 1 else f"s{a + 1}{b + 1}")
+            consts[f"R{a}{b}"] = Constant(float(r[a][b]), "s" if m == 1 else f"s{a + 1}{b + 1}", f"R[{a}][{b}]")
     return {**consts, "free": flags, **_structure(params)}
 
 
@@ -640,7 +640,7 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
     # second multiplier block per product, and more fraction bits than y - yhat has are useless
     for j in range(params.m):
         e = formats[f"e{j + 1}"]
-        need = math.ceil(math.log2(4.0 / math.sqrt(params.R[j][j]))) if params.R[j][j] < 16.0 else 0
+        need = noise_frac_bits(params.R[j][j])
         want = min(max(e.frac_bits, need), max(e.frac_bits, state_frac))
         if want > e.frac_bits:
             formats[f"e{j + 1}"] = QFormat(e.int_bits, want, e.rounding, e.overflow)

@@ -42,7 +42,7 @@ import numpy as np
 
 from kfpga.errors import ConfigError
 from kfpga.fixed import QFormat, Rounding
-from kfpga.formats import register_formats
+from kfpga.formats import noise_frac_bits, register_formats
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
 from kfpga.model.reference import KalmanParams, kalman_decomposed, steady_state, steady_state_gain
 from kfpga.spec import Constant, FilterSpec, Output, Point, Variant
@@ -187,18 +187,18 @@ def _rate_constants(params):
     shift = t_exponent(params.T)
     out = {"t_shift": shift}
     if shift is None:
-        out["inv_t"] = Constant(1.0 / params.T, "inv_t")
+        out["inv_t"] = Constant(1.0 / params.T, "inv_t", "1/T")
     return out
 
 
 def _steady_constants(params):
     k1, k2 = steady_gain(params)
-    return {"k1": Constant(k1, "gain"), "k2": Constant(k2, "gain"), **_rate_constants(params)}
+    return {"k1": Constant(k1, "gain", "K1"), "k2": Constant(k2, "gain", "T*K2"), **_rate_constants(params)}
 
 
 def _full_constants(params):
     scaled = params.scaled()
-    return {"q": Constant(scaled.Q, "pl"), "r": Constant(params.R, "s"), **_rate_constants(params)}
+    return {"q": Constant(scaled.Q, "pl", "T^2*Q"), "r": Constant(params.R, "s", "R"), **_rate_constants(params)}
 
 
 def _initial(params):
@@ -243,6 +243,12 @@ def _ranges(params, stimulus=None):
 
 def _default_formats(params, ranges, *, operand_bits, state_frac):
     formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac)
+    # the innovation's step small against the measurement noise (more than the multiplier's 18
+    # bits then: a second multiplier piece per product), but no finer than the states
+    e = formats["e"]
+    want = min(max(e.frac_bits, noise_frac_bits(params.R)), max(e.frac_bits, state_frac))
+    if want > e.frac_bits:
+        formats["e"] = QFormat(e.int_bits, want, e.rounding, e.overflow)
     k = t_exponent(params.T)
     fv = formats["v"]
     if k is not None and fv.int_bits - k >= 1 and fv.frac_bits + k >= 0:

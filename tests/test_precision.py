@@ -1,0 +1,94 @@
+"""Word lengths that are right for the model: constants held within 1 %, precision-aware defaults.
+
+The grid of the issue: T in {0.001, 0.01, 0.1, 1, 8}, Q in {0.01, 2, 100}, R in {0.01, 4, 1000}
+on the paper's model (cv2) and the constant-acceleration model (ca3): the default formats either
+give a fixed RMSE of x1 within 1 % of float's, with no overflow, or the config is refused with
+one line that names the point (or says why the variant does not apply).
+"""
+
+import itertools
+import re
+
+import numpy as np
+import pytest
+
+from kfpga.analysis import compare
+from kfpga.config import ConfigError, FilterConfig
+from kfpga.model.kalman import StateSpaceParams
+from kfpga.model.reference import KalmanParams
+from kfpga.scenarios import for_config
+
+GRID = list(itertools.product((0.001, 0.01, 0.1, 1.0, 8.0), (0.01, 2.0, 100.0), (0.01, 4.0, 1000.0)))
+
+
+def ca3(t, q, r):
+    return StateSpaceParams(F=((1.0, t, t * t / 2), (0.0, 1.0, t), (0.0, 0.0, 1.0)), G=np.eye(3).tolist(),
+                            Q=(np.eye(3) * q).tolist(), H=((1.0, 0.0, 0.0),), R=((r,),), P0=(np.eye(3) * 10).tolist(),
+                            x0=(0.0, 0.0, 0.0), T=t)
+
+
+def config_for(model, t, q, r):
+    if model == "cv2":
+        return FilterConfig(filter="kalman2", params=KalmanParams(T=t, Q=q, R=r))
+    return FilterConfig(filter="kalman", params=ca3(t, q, r))
+
+
+REFUSAL = re.compile(r"^(the (constant .+|reset value of \w+) = \S+ (rounds to 0|is held as \S+) in formats\.(\w+) = "
+                     r"Q\d+\.\d+.*: \4 needs at least \d+ fraction bits to hold it within 1 % \((steady|full) variant\)"
+                     r"|model\.F\[\d\]\[\d\] = .*: the time-varying variant needs F's entries to be 0 or \+-2\*\*k .*)$")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("variant", ["steady", "full"])
+@pytest.mark.parametrize("model", ["cv2", "ca3"])
+def test_defaults_are_within_one_percent_or_refused_naming_the_point(model, variant, seed):
+    passed, refused = [], []
+    for t, q, r in GRID:
+        where = f"{model} {variant} T={t} Q={q} R={r}"
+        try:
+            config = config_for(model, t, q, r)
+            config.require_variant(variant)
+        except ConfigError as exc:
+            assert REFUSAL.match(str(exc)), (where, str(exc))
+            refused.append(where)
+            continue
+        truth, y = for_config("sine", 5000, seed, config)
+        m = compare(config, variant, y, truth, limit_cycle=False).metrics
+        assert m["overflows"] == 0, (where, m["overflow_points"])
+        assert abs(m["rmse_fixed_over_float"] - 1) <= 0.01, (where, m["rmse_fixed_over_float"])
+        passed.append(where)
+    assert passed, refused  # T = 1 and T = 8 (F's entries powers of two) run for every model
+
+
+def test_the_millisecond_case_is_refused_naming_pl():
+    config = FilterConfig.from_dict({"model": {"T": 0.001}})
+    with pytest.raises(ConfigError, match=re.escape(
+            "the constant T^2*Q = 2e-06 rounds to 0 in formats.pl = Q5.13 (LSB 0.000122): pl needs at least 25 "
+            "fraction bits to hold it within 1 % (full variant)")):
+        config.require_variant("full")
+    config.require_variant("steady")  # its gains get the bits they need: gain Q1.17
+    assert str(config.formats["gain"]) == "Q1.17"
+
+
+def test_a_pinned_format_that_loses_a_constant_is_refused():
+    config = FilterConfig.from_dict({"formats": {"gain": "Q2.5"}})
+    # K1 = 0.70512 on a 1/32 grid: 23/32 = 0.71875, 1.9 % off; on a 1/64 grid 45/64, 0.3 % off
+    with pytest.raises(ConfigError, match=r"^the constant K1 = 0\.7051 is held as 0\.7188 in formats\.gain = Q2\.5, "
+                                          r"1\.9 % off: gain needs at least 6 fraction bits"):
+        config.require_variant("steady")
+
+
+def test_a_reset_value_is_held_or_refused():
+    # by default x1 gets the bits 0.001 needs: 15 (33/2**15 is 0.7 % off, 16/2**14 2.3 %) ...
+    assert FilterConfig.from_dict({"model": {"x0": [0.001, 0.0]}}).formats["x1"].frac_bits == 15
+    # ... a pinned format that cannot hold it is refused
+    config = FilterConfig.from_dict({"model": {"x0": [0.001, 0.0]}, "formats": {"x1": "Q18.8", "xl1": "Q18.8"}})
+    with pytest.raises(ConfigError, match=r"^the reset value of x1 = 0\.001 rounds to 0 in formats\.x1 = Q18\.8 "
+                                          r"\(LSB 0\.00391\): x1 needs at least 15 fraction bits"):
+        config.require_variant("steady")
+
+
+def test_small_measurement_noise_gives_the_innovation_fraction_bits():
+    # R = 0.01: sigma 0.1 code, so e keeps steps of at most 0.025 codes: 6 fraction bits
+    assert FilterConfig.from_dict({"model": {"R": 0.01}}).formats["e"].frac_bits == 6
+    assert FilterConfig().formats["e"].frac_bits == 1  # R = 4: the paper's Q17.1
