@@ -85,6 +85,7 @@ def compare(config, variant, y, truth=None, *, settle=None, seed=None, scenario=
         diff = np.abs(fixed[name] - flt[name])
         out_lsb = model.output_format(name).lsb
         fields[name] = {"format": str(model.output_format(name)), "max_abs_fixed_minus_float": float(np.max(diff)),
+                        "rms_fixed_minus_float": float(np.sqrt(np.mean(diff[w] ** 2))),
                         "max_abs_fixed_minus_float_lsb": float(np.max(diff) / out_lsb),
                         "sqnr_db": sqnr_db(flt[name], fixed[name])}
     metrics = {

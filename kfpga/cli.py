@@ -339,6 +339,74 @@ def _run_sweep(args):
     return 0
 
 
+# -- propose ---------------------------------------------------------------------------------
+
+
+def _run_propose(args):
+    from kfpga.analysis import sample_count
+    from kfpga.config import analysed_ranges
+    from kfpga.paths import check_output_file
+    from kfpga.propose import proposal_toml, propose
+
+    _check_signal_args(args)
+    inputs = [args.config] if args.config else []
+    inputs += [args.input] if args.input else []
+    out = str(check_output_file(args.out, option="--out", inputs=inputs, extensions=(".toml",))) if args.out else None
+    config = _load_config(args)
+    if config.pinned:
+        raise UsageError(f"propose chooses every format itself, so the formats {args.config} pins would be ignored "
+                         f"({', '.join(config.pinned)}): remove its [formats] tables")
+    truth, y, label = _samples_for(args, config, command="propose", need_truth=True)
+    bar = None
+    if not args.quiet:
+        from tqdm import tqdm
+
+        bar = tqdm(desc="propose", unit="candidate", file=sys.stderr)
+
+    def step(text):  # what is being tried; the bar counts the candidates
+        if bar is not None:
+            bar.set_postfix_str(text[:60])
+
+    step.tick = (lambda: bar.update(1)) if bar is not None else (lambda: None)
+
+    result = propose(config, args.variant, {label: (truth, y)}, budget=args.budget, objective=args.objective,
+                     settle=args.settle, progress=step)
+    if bar is not None:
+        bar.close()
+    ranges = analysed_ranges(config.params, filter=config.filter)
+    if out:
+        Path(out).write_text(proposal_toml(result, ranges, variant=args.variant, budget=args.budget,
+                                           objective=args.objective, seconds=result.seconds))
+    rows = [{"point": name, "default": str(config.formats[name]), "proposed": str(fmt),
+             "analysed_max": ranges.get(name), "bound_by": result.bound.get(name)}
+            for name, fmt in result.config.formats.items()]
+    summary = {"filter": config.filter, "variant": args.variant, "signal": label, "samples": sample_count(y),
+               "seed": args.seed, "budget": args.budget, "objective": args.objective, "points": rows,
+               "multipliers": {"default": result.multipliers[0], "proposed": result.multipliers[1]},
+               "register_bits": {"default": result.register_bits[0], "proposed": result.register_bits[1]},
+               "check": result.metrics, "candidates": result.evaluations, "seconds": result.seconds,
+               "notes": result.notes, "out": out}
+    if args.json:
+        _emit_json(summary)
+        return 0
+    print(f"kfpga propose: {config.filter} filter, {args.variant} variant, {label}, {sample_count(y)} samples; "
+          f"budget {100 * args.budget:g} %, objective {args.objective}")
+    print(f"  {'point':<6} {'default':>8} {'proposed':>8}  bound by")
+    for r in rows:
+        print(f"  {r['point']:<6} {r['default']:>8} {r['proposed']:>8}  {r['bound_by']}")
+    m = result.metrics
+    ratio = next(v for k, v in m.items() if k == label)
+    print(f"  multiplier pieces {result.multipliers[0]} -> {result.multipliers[1]}, register bits "
+          f"{result.register_bits[0]} -> {result.register_bits[1]}")
+    print(f"  check: RMSE {100 * (ratio - 1):+.3f} % of float, limit cycle {m['limit_cycle_lsb']:.3g} LSB, dead band "
+          f"{m['dead_band_lsb']:.3g} LSB, no overflow on full-scale stress")
+    for note in result.notes:
+        print(f"  note: {note}")
+    print(f"  {result.evaluations} candidates in {result.seconds:.1f} s" + (f"; wrote {out}" if out else
+                                                                            "; --out FILE writes it as a config"))
+    return 0
+
+
 # -- filter ----------------------------------------------------------------------------------
 
 
@@ -799,6 +867,24 @@ def build_parser():
     p.add_argument("--plot", metavar="PNG", help="where to draw the sweep (default: build/sweep_VARIANT.png)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_run_sweep)
+
+    p = sub.add_parser("propose", help="search per-point word lengths for a model under stated constraints",
+                       description="Search the format of every quantisation point: integer bits from the analysed "
+                                   "ranges, fraction bits trimmed (or first grown) point by point, so that the fixed "
+                                   "RMSE of the main output stays within --budget of float's on the signal, nothing "
+                                   "overflows on full-scale stress, no limit cycle or dead band exceeds one input LSB "
+                                   "and every constant is held within 1 %. --objective multipliers first keeps "
+                                   "multiplier operands within 18 bits, then trims register bits; bits trims the "
+                                   "widest points first. Prints a table; --out writes a commented config.")
+    _add_signal_args(p)
+    p.add_argument("--budget", type=_budget, default=0.01, metavar="PCT",
+                   help="how far the fixed RMSE may be from float's, either way (default: 1%%)")
+    p.add_argument("--objective", choices=("multipliers", "bits"), default="multipliers",
+                   help="what to save first (default: multipliers)")
+    p.add_argument("--out", metavar="TOML", help="write the proposal as a config file")
+    p.add_argument("--json", action="store_true", help="print the proposal as JSON")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_run_propose)
 
     p = sub.add_parser("filters", help="list the registered filters, their variants, inputs and outputs",
                        description="List every registered filter with its variants, its inputs and outputs, and "

@@ -171,6 +171,9 @@ class FilterSpec:
     adc:
         ``adc(params) -> (channel per input) | None``: the ADS8364 channels the parameters name
         for the inputs; ``None`` (or no hook) leaves them to the board's defaults.
+    error_std:
+        ``error_std(params) -> {output: std}``: the float filter's steady-state error of each
+        output (input units), the yardstick of the outputs no truth comes with (``propose``).
     """
 
     name: str
@@ -194,6 +197,7 @@ class FilterSpec:
     presets: Mapping = field(default_factory=dict)
     measured: Callable | None = None
     adc: Callable | None = None
+    error_std: Callable | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "points", MappingProxyType(dict(self.points)))

@@ -775,6 +775,21 @@ PRESETS = {
 }
 
 
+def _error_std(params):
+    """Steady-state error of every state and every predicted observation, for the steady gain."""
+    from kfpga.model.reference import steady_error_std
+
+    try:
+        gain = steady_gain(params)
+    except (ValueError, PBHError):
+        return None
+    f, gqg, h, r = params.arrays()
+    states, predictions = steady_error_std(f, gqg, h, r, gain)
+    out = {f"x{i + 1}": float(v) for i, v in enumerate(states)}
+    out.update({f"yhat{j + 1}": float(v) for j, v in enumerate(predictions)})
+    return out
+
+
 SPEC = FilterSpec(
     name="kalman",
     summary="any linear state-space model: n = 1..4 states, m = 1..2 observations, from F, G, Q, H, R",
@@ -797,4 +812,5 @@ SPEC = FilterSpec(
     presets=PRESETS,
     measured=_measured,
     adc=lambda params: params.adc,
+    error_std=_error_std,
 )

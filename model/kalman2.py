@@ -44,7 +44,7 @@ from kfpga.errors import ConfigError
 from kfpga.fixed import QFormat, Rounding
 from kfpga.formats import noise_frac_bits, register_formats
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
-from kfpga.model.reference import KalmanParams, kalman_decomposed, steady_state, steady_state_gain
+from kfpga.model.reference import KalmanParams, kalman_decomposed, steady_error_std, steady_state, steady_state_gain
 from kfpga.spec import Constant, FilterSpec, Output, Point, Variant
 
 __all__ = ["SPEC", "POINTS", "t_exponent", "steady_gain", "predict", "innovation", "correct", "rate", "rate_operand",
@@ -309,6 +309,17 @@ def _goals(config, variant, channels=1):
             "worst_path_ns": WORST_PATH_GOAL_NS}
 
 
+def _error_std(params):
+    """Steady-state error of x1, x2 and the prediction yhat (physical units)."""
+    if not params.Q > 0:
+        return None
+    f = np.array([[1.0, params.T], [0.0, 1.0]])
+    gqg = np.array([[0.0, 0.0], [0.0, params.Q]])
+    k, _ = steady_state_gain(params.T, params.Q, params.R)
+    (s1, s2), (sy,) = steady_error_std(f, gqg, [[1.0, 0.0]], [[params.R]], np.reshape(k, (2, 1)))
+    return {"x1": s1, "x2": s2, "yhat": sy}
+
+
 SPEC = FilterSpec(
     name="kalman2",
     summary="the paper's 2-state Kalman filter (angle, rate), steady-state or time-varying gain",
@@ -329,4 +340,5 @@ SPEC = FilterSpec(
     default_output="x1",
     random_params=_random_params,
     presets={"cv2": ("the paper's constant-velocity filter (seeds/001): T = 1, Q = 2, R = 4, P0 = 10 I", KalmanParams)},
+    error_std=_error_std,
 )

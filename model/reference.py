@@ -222,3 +222,23 @@ def steady_state(y, params=KalmanParams(), gain=None):
         x2 = x2 + k2 * e
         out["x1"][..., k], out["x2"][..., k], out["yhat"][..., k], out["e"][..., k] = x1, x2, xl1, e
     return out
+
+
+def steady_error_std(F, GQG, H, R, K):
+    """Standard deviation of each state's and each prediction's error in steady state, for the
+    gain ``K`` (any stabilising gain, the Kalman gain or a fixed one).
+
+    The corrected error obeys ``e+ = (I - K H) F e + (I - K H) G w - K v``, so its covariance P
+    solves the Lyapunov equation ``P = A P A^T + (I - K H) G Q G^T (I - K H)^T + K R K^T`` with
+    ``A = (I - K H) F``; the prediction ``H F x`` has error covariance ``H (F P F^T + G Q G^T) H^T``.
+    Returns ``(state std, prediction std)``.
+    """
+    from scipy.linalg import solve_discrete_lyapunov
+
+    F, GQG, H, R, K = (np.atleast_2d(np.asarray(a, dtype=np.float64)) for a in (F, GQG, H, R, K))
+    n = F.shape[0]
+    ikh = np.eye(n) - K @ H
+    p = solve_discrete_lyapunov(ikh @ F, ikh @ GQG @ ikh.T + K @ R @ K.T)
+    pred = H @ (F @ p @ F.T + GQG) @ H.T
+    return np.sqrt(np.clip(np.diag(p), 0, None)), np.sqrt(np.clip(np.diag(pred), 0, None))
+

@@ -1,0 +1,74 @@
+"""``kfpga propose``: the proposal meets its constraints, and the flow takes it (compare, generate,
+simulate on both simulators, bit-exact)."""
+
+import json
+import os
+
+import pytest
+
+from kfpga.cli import main
+from kfpga.config import FilterConfig
+from kfpga.sim.runner import SIMULATORS
+from kfpga.tools import simulator_available
+
+pytestmark = pytest.mark.xdist_group("propose")  # one worker computes the shared proposal
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture(scope="module")
+def proposal(tmp_path_factory):
+    """The paper's steady filter, proposed on a short sine (the module's tests share it)."""
+    out = tmp_path_factory.mktemp("propose") / "p.toml"
+    code = main(["propose", "--samples", "4000", "--seed", "3", "--out", str(out), "--quiet", "--json"])
+    assert code == 0
+    return out
+
+
+def test_proposal_meets_its_constraints(proposal, capsys, seed):
+    config = FilterConfig.from_toml(proposal)
+    default = FilterConfig()
+    text = proposal.read_text()
+    # every point says what bound it; fewer register bits, no more multipliers than the defaults
+    assert text.count("fraction bits bound by:") == len(config.formats)
+    assert sum(f.width for f in config.formats.values()) < sum(f.width for f in default.formats.values())
+    assert config.width_report("steady").blocks() <= default.width_report("steady").blocks()
+    # compare confirms it on the scenario it was made for: within 1 %, no overflow, limit cycles <= 1 LSB
+    code, out, _ = run(capsys, "compare", "--config", str(proposal), "--samples", "4000", "--seed", "3", "--json")
+    m = json.loads(out)
+    assert code == 0 and abs(m["rmse_fixed_over_float"] - 1) <= 0.01 and m["overflows"] == 0
+    assert m["limit_cycle_lsb"] <= 1.0 and m["dead_band_lsb"] <= 1.0
+    # the points only the time-varying variant writes keep their formats
+    for name in ("p", "pl", "s"):
+        assert config.formats[name] == default.formats[name]
+
+
+@pytest.mark.cosim
+@pytest.mark.parametrize("simulator", SIMULATORS)
+def test_generate_and_simulate_take_the_proposal(proposal, simulator, capsys, tmp_path, seed):
+    """(The benches bound every sample's wait, so a hung design fails rather than hangs.)"""
+    ok, why = simulator_available(simulator)
+    if not ok:
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"CI must run both simulators: {why}")
+        pytest.skip(why)
+    code, _, err = run(capsys, "generate", "--config", str(proposal), "--out", str(tmp_path / "g"), "--no-lint")
+    assert code == 0, err
+    code, out, err = run(capsys, "simulate", "--config", str(proposal), "--samples", "300", "--seed", str(seed),
+                         "--simulator", simulator, "--json", "--quiet")
+    res = json.loads(out)
+    assert code == 0 and res["mismatches"] == 0 and res["samples"] == 300, err
+
+
+def test_propose_refuses_pinned_formats_and_bad_options(capsys, tmp_path):
+    cfg = tmp_path / "k.toml"
+    cfg.write_text('[formats.x1]\nformat = "Q18.10"\n')
+    code, _, err = run(capsys, "propose", "--config", str(cfg), "--samples", "500")
+    assert code == 2 and err.strip().endswith("propose chooses every format itself, so the formats "
+                                              f"{cfg} pins would be ignored (x1): remove its [formats] tables")
+    code, _, err = run(capsys, "propose", "--out", str(tmp_path / "p.txt"), "--samples", "500")
+    assert code == 2 and "--out" in err and ".toml" in err
