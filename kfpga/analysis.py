@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -11,6 +12,7 @@ from kfpga.fixedmodel import FixedModel
 from kfpga.formats import MAX_OPERAND_BITS
 
 __all__ = ["sample_count", "rmse", "sqnr_db", "float_run", "Comparison", "compare", "limit_cycles", "sweep",
+           "precision_warnings",
            "plot_compare", "plot_sweep"]
 
 #: The noise-free inputs of the limit-cycle check: (name, level before, level after, step at)
@@ -149,6 +151,28 @@ def limit_cycles(config, variant, *, samples=LIMIT_CYCLE_SAMPLES, window=LIMIT_C
         dead, cycle = max(dead, entry["dead_band_lsb"]), max(cycle, entry["limit_cycle_lsb"])
     return {"dead_band_lsb": dead, "limit_cycle_lsb": cycle, "inputs": per_input, "field": main,
             "samples": samples, "window": window}
+
+
+def precision_warnings(config, budget=0.01):
+    """Lines naming every output point whose rounding alone (uniform noise of rms step/sqrt(12))
+    would add more than ``budget`` to the float filter's steady-state error of that output
+    (``FilterSpec.error_std``), that is, whose rms rounding noise exceeds
+    ``sqrt((1 + budget)**2 - 1)`` (14 % for 1 %) of that error."""
+    spec = config.spec
+    std = spec.error_std(config.params) if spec.error_std else None
+    if not std:
+        return []
+    share = math.sqrt((1.0 + budget) ** 2 - 1.0)
+    out = []
+    for o in spec.outputs_for(config.params):
+        fmt = config.formats.get(o.point)
+        sigma = std.get(o.name)
+        if fmt is None or not sigma or fmt.lsb / math.sqrt(12.0) <= share * sigma:
+            continue
+        out.append(f"formats.{o.point} = {fmt}: its rounding noise ({fmt.lsb:g}/sqrt(12) rms) is more than "
+                   f"{100 * share:.3g} % of the float filter's own error of {o.name} ({sigma:.3g}), so it alone adds more "
+                   f"than {100 * budget:g} % to that RMSE; give it more fraction bits")
+    return out
 
 
 def sweep_config(params, width, ranges):

@@ -93,6 +93,14 @@ def _load_config(args, *, hardware=False):
     return config
 
 
+def _warn_precision(config):
+    """Warnings about output steps coarse against the float filter's noise, on stderr."""
+    from kfpga.analysis import precision_warnings
+
+    for line in precision_warnings(config):
+        print(f"warning: {line}", file=sys.stderr)
+
+
 def _pick_seed(seed):
     return secrets.randbelow(2**31) if seed is None else seed
 
@@ -254,6 +262,7 @@ def _run_compare(args):
     args.plot = _check_plot(args.plot)
     config = _load_config(args)
     truth, y, label = _samples_for(args, config, command="compare")
+    _warn_precision(config)
     result = compare(config, args.variant, y, truth, settle=args.settle, seed=args.seed if not args.input else None,
                      scenario=None if args.input else args.scenario)
     m = result.metrics
@@ -468,6 +477,7 @@ def _run_formats(args):
     if args.pin_formats and not args.toml:
         _not_with(args, "--pin-formats", "the table", "it says how --toml writes the formats")
     config = _load_config(args)
+    _warn_precision(config)
     if args.toml:
         print(config.to_toml(formats=args.pin_formats), end="")
         return 0
@@ -539,6 +549,7 @@ def _run_generate(args):
     check_output_dir(args.out, option="--out")
     _check_channel(args)
     config = _load_config(args, hardware=True)
+    _warn_precision(config)
     _check_channel(args, config)
     if args.ratio < 2:
         raise UsageError(f"--ratio must be >= 2, not {args.ratio}")

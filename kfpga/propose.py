@@ -143,8 +143,8 @@ def _with_frac(formats, members, frac):
 
 
 def _cost(config, variant):
-    report = config.width_report(variant)
-    blocks = report.blocks() if variant != "full" else report.widest_product_blocks()
+    """(18 x 18 pieces the update's products take, one multiplier each; bits of every point)."""
+    blocks = config.width_report(variant).blocks()
     bits = sum(config.formats[name].width for name in config.formats)
     return blocks, bits
 

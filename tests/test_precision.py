@@ -92,3 +92,19 @@ def test_small_measurement_noise_gives_the_innovation_fraction_bits():
     # R = 0.01: sigma 0.1 code, so e keeps steps of at most 0.025 codes: 6 fraction bits
     assert FilterConfig.from_dict({"model": {"R": 0.01}}).formats["e"].frac_bits == 6
     assert FilterConfig().formats["e"].frac_bits == 1  # R = 4: the paper's Q17.1
+
+
+def test_outputs_coarse_against_the_filter_noise_are_warned(capsys):
+    from kfpga.analysis import precision_warnings
+    from kfpga.cli import main
+
+    assert precision_warnings(FilterConfig()) == []
+    # x2's float error is 1.92 (steady state, T = 1, Q = 2, R = 4): whole steps add 1/sqrt(12) = 0.289
+    # rms, more than sqrt(1.01**2 - 1) * 1.92 = 0.272; half steps (0.144) do not
+    coarse = FilterConfig.from_dict({"formats": {"x2": "Q17.0"}})
+    (line,) = precision_warnings(coarse)
+    assert line.startswith("formats.x2 = Q17.0: its rounding noise (1/sqrt(12) rms) is more than 14.2 % of the float "
+                           "filter's own error of x2 (1.92)")
+    assert precision_warnings(FilterConfig.from_dict({"formats": {"x2": "Q17.1"}})) == []
+    assert main(["formats", "--preset", "ca3"]) == 0
+    assert "warning" not in capsys.readouterr().err
