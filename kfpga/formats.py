@@ -8,6 +8,9 @@
   gives up the guard bit instead; its saturation still raises the overflow flag.
 * A point that holds only constants gets no guard bit; a point ``same_as`` another shares its
   format.
+* Noise: a point whose float error is known (the filter's steady-state error of that state or
+  output) gets the fraction bits whose rounding adds at most 1 % to that error; an operand then
+  grows past the multiplier width when it must (each product takes more multiplier pieces).
 * Precision: every constant and reset value of the variants that apply must be held within
   :data:`PRECISION` (1 %). A register gets the fraction bits that takes; an operand, whose width
   is fixed, gives up its guard bit for them when its range allows. A value that still does not
@@ -23,7 +26,7 @@ import math
 from kfpga.fixed import QFormat, Rounding, bits_for, to_raw
 
 __all__ = ["MULTIPLIER_BITS", "MAX_OPERAND_BITS", "STATE_FRAC_BITS", "GUARD_BITS", "PRECISION", "register_formats",
-           "precision_frac_bits", "precision_needs", "noise_frac_bits"]
+           "precision_frac_bits", "precision_needs", "noise_frac_bits", "noise_step_frac"]
 
 #: Cyclone II embedded multiplier operand width (Cyclone II Device Handbook, vol. 1, "Embedded
 #: Multipliers": 18x18 or two 9x9 per block).
@@ -74,8 +77,20 @@ def precision_needs(spec, params):
     return needs
 
 
-def register_formats(spec, params, ranges, *, operand_bits=MULTIPLIER_BITS, state_frac=STATE_FRAC_BITS):
-    """``{point: QFormat}`` for the points of ``spec`` that ``params`` uses, by the rules above."""
+def noise_step_frac(sigma, budget=PRECISION):
+    """The fewest fraction bits whose rounding noise (rms step/sqrt(12)) adds at most ``budget``
+    to an error of rms ``sigma`` it is uncorrelated with: step/sqrt(12) <= sqrt((1+b)^2 - 1) sigma."""
+    limit = math.sqrt((1.0 + budget) ** 2 - 1.0) * sigma * math.sqrt(12.0)
+    return max(0, math.ceil(-math.log2(limit))) if limit > 0 else 0
+
+
+def register_formats(spec, params, ranges, *, operand_bits=MULTIPLIER_BITS, state_frac=STATE_FRAC_BITS,
+                     noise=None):
+    """``{point: QFormat}`` for the points of ``spec`` that ``params`` uses, by the rules above.
+
+    ``noise``: ``{register point: rms error of the float filter there}``; such a register also
+    gets the fraction bits whose rounding adds at most 1 % to that error (:func:`noise_step_frac`).
+    """
     names = list(spec.points_for(params))
     points = spec.points
     formats = {}
@@ -88,6 +103,11 @@ def register_formats(spec, params, ranges, *, operand_bits=MULTIPLIER_BITS, stat
         return max([ranges.get(name, 0.0)] + [ranges.get(n, 0.0) for n in names if points[n].same_as == name])
 
     needs = precision_needs(spec, params)
+    noisy = {}  # an operand may grow past the multiplier width for these (more pieces per product)
+    for name, sigma in (noise or {}).items():
+        if name in names and sigma and sigma > 0:
+            noisy[name] = noise_step_frac(sigma)
+            needs[name] = max(needs.get(name, 0), noisy[name])
 
     def precise(name):
         # the fraction bits of this point and of the points that share its format
@@ -101,7 +121,10 @@ def register_formats(spec, params, ranges, *, operand_bits=MULTIPLIER_BITS, stat
             if need + g > operand_bits - 1 or operand_bits - need - g < precise(name):
                 g = 0  # no room: keep the fraction bits, let saturation (flagged) cover the rest
             i = need + g
-            formats[name] = QFormat(i, max(operand_bits - i, 0), Rounding.NEAREST)
+            frac = max(operand_bits - i, 0)
+            if noisy.get(name, 0) > frac:
+                frac = min(noisy[name], MAX_OPERAND_BITS - i)
+            formats[name] = QFormat(i, frac, Rounding.NEAREST)
     for name in names:
         point = points[name]
         if point.operand or point.same_as is not None:

@@ -165,20 +165,24 @@ def propose(config, variant, signals, *, budget=0.01, objective="multipliers", s
     formats = dict(config.formats)
     groups = _groups(config)
     notes = []
+    points = config.spec.points
+    unused = [g for g in groups if points[g].variants and variant not in points[g].variants]
+    used = [name for g in groups if g not in unused for name in groups[g]]
     failed, _ = judge(formats)
+    first = failed
     grown = 0
     while failed and grown < MAX_GROW:
         grown += 1
         say(f"start fails ({failed}): every point +1 fraction bit")
-        formats = {name: QFormat(f.int_bits, f.frac_bits + 1, f.rounding, f.overflow) for name, f in formats.items()}
+        formats = {name: QFormat(f.int_bits, f.frac_bits + (name in used), f.rounding, f.overflow)
+                   for name, f in formats.items()}
         failed, _ = judge(formats)
     if failed:
         raise ConfigError(f"no formats found: with {MAX_GROW} more fraction bits on every point, still {failed}")
     if grown:
-        notes.append(f"the start failed; every point got {grown} more fraction bit(s) first")
+        notes.append(f"the default formats failed ({first}); every point the variant uses got {grown} more "
+                     "fraction bit(s) first")
     bound = {}
-    points = config.spec.points
-    unused = [g for g in groups if points[g].variants and variant not in points[g].variants]
     for leader in unused:  # points the variant never writes keep their formats
         for name in groups[leader]:
             bound[name] = f"not used by the {variant} variant (kept)"

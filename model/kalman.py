@@ -633,7 +633,13 @@ def _ranges(params, stimulus=None):
 
 
 def _default_formats(params, ranges, *, operand_bits, state_frac):
-    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac)
+    err = _error_std(params)
+    # the registers' steps small against the float filter's own error of each state and prediction
+    noise = None
+    if err:
+        noise = {f"x{i + 1}": err[f"x{i + 1}"] for i in range(params.n)}
+        noise.update({f"yh{j + 1}": err[f"yhat{j + 1}"] for j in range(params.m)})
+    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, noise=noise)
     # the innovation's step must be small against the observation noise it carries into every
     # state (at most a quarter of its standard deviation), else the rounding of e, not the
     # noise, sets the error (R = 0.01: 0.1 codes); beyond the multiplier width it takes a

@@ -242,7 +242,11 @@ def _ranges(params, stimulus=None):
 
 
 def _default_formats(params, ranges, *, operand_bits, state_frac):
-    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac)
+    err = _error_std(params)
+    # the registers' steps small against the float filter's own error there (v = T x2)
+    noise = ({"x1": min(err["x1"], err["yhat"]), "v": params.T * err["x2"], "vt": params.T * err["x2"], "x2": err["x2"]}
+             if err else None)
+    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, noise=noise)
     # the innovation's step small against the measurement noise (more than the multiplier's 18
     # bits then: a second multiplier piece per product), but no finer than the states
     e = formats["e"]
