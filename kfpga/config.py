@@ -256,6 +256,7 @@ class FilterConfig:
                   if isinstance(c, Constant)]
         points = dict(v.state_for(self.params))
         values += [(f"the reset value of {name}", value, points[name]) for name, value in v.initial(self.params).items()]
+        values += [(f"the settled value {label}", value, point) for label, value, point in v.settled(self.params)]
         for label, value, point in values:
             if value == 0 or not isinstance(point, str):
                 continue  # exact (a structural format is made for its value)
@@ -266,7 +267,7 @@ class FilterConfig:
             if raw != 0 and error <= PRECISION:
                 continue
             need = precision_frac_bits(value, fmt.rounding)
-            what = label if label.startswith("the reset") else "the constant " + label
+            what = label if label.startswith(("the reset", "the settled")) else "the constant " + label
             how = (f"rounds to 0 in formats.{point} = {fmt} (LSB {fmt.lsb:.3g})" if raw == 0 else
                    f"is held as {held:.4g} in formats.{point} = {fmt}, {100 * error:.2g} % off")
             raise ConfigError(f"{what} = {value:.4g} {how}: {point} needs at least {need} fraction bits to hold it "

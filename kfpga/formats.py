@@ -8,8 +8,9 @@
   gives up the guard bit instead; its saturation still raises the overflow flag.
 * A point that holds only constants gets no guard bit; a point ``same_as`` another shares its
   format.
-* Noise: a point whose float error is known (the filter's steady-state error of that state or
-  output) gets the fraction bits whose rounding adds at most 1 % to that error; an operand then
+* Noise: a point whose float error is known (the part of the filter's steady-state error there
+  that the measurement noise alone causes, its floor on any signal) gets the fraction bits whose
+  rounding adds at most a quarter of 1 % to that error (several roundings add up); an operand then
   grows past the multiplier width when it must (each product takes more multiplier pieces).
 * Precision: every constant and reset value of the variants that apply must be held within
   :data:`PRECISION` (1 %). A register gets the fraction bits that takes; an operand, whose width
@@ -71,6 +72,7 @@ def precision_needs(spec, params):
         points = dict(variant.state_for(params))
         values = [(c.point, c.value) for c in variant.constants(params).values() if isinstance(c, Constant)]
         values += [(points[name], value) for name, value in variant.initial(params).items()]
+        values += [(point, value) for _, value, point in variant.settled(params)]
         for point, value in values:
             if isinstance(point, str) and value != 0:
                 needs[point] = max(needs.get(point, 0), precision_frac_bits(value))
@@ -106,7 +108,8 @@ def register_formats(spec, params, ranges, *, operand_bits=MULTIPLIER_BITS, stat
     noisy = {}  # an operand may grow past the multiplier width for these (more pieces per product)
     for name, sigma in (noise or {}).items():
         if name in names and sigma and sigma > 0:
-            noisy[name] = noise_step_frac(sigma)
+            # a quarter of the budget each: several roundings add up in one output
+            noisy[name] = noise_step_frac(sigma, PRECISION / 4)
             needs[name] = max(needs.get(name, 0), noisy[name])
 
     def precise(name):

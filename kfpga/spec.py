@@ -101,6 +101,10 @@ class Variant:
     hardware:
         ``hardware(params) -> None | why not``: whether the variant has a core for these
         parameters (a variant may be model-only for some of them).
+    settled:
+        ``settled(params) -> [(label, value, point), ...]``: values the update settles to (the
+        steady-state covariance of a time-varying gain), which, like the constants, their
+        points must hold within 1 %.
     """
 
     name: str
@@ -111,6 +115,7 @@ class Variant:
     update: Callable
     applies: Callable = field(default=lambda params: None)  # params -> None or why not
     hardware: Callable = field(default=lambda params: None)  # params -> None or why there is no core
+    settled: Callable = field(default=lambda params: [])  # params -> [(label, value, point)]
 
     def state_for(self, params):
         """``((name, point), ...)`` of a model with these parameters."""

@@ -531,6 +531,21 @@ def _full_applies(params):
     return None
 
 
+def _full_settled(params):
+    """The covariance the time-varying gain settles to: P and Pl, upper triangles."""
+    try:
+        gain, pl = dare_gain(params)
+    except (ValueError, PBHError):
+        return []
+    p = (np.eye(params.n) - gain @ np.array(params.H)) @ pl
+    scale = float(np.max(np.abs(pl)))
+    out = []
+    for name, mat in (("p", p), ("pl", pl)):
+        out += [(f"{name.upper()}{i + 1}{j + 1}", float(mat[i][j]), f"{name}{i + 1}{j + 1}")
+                for i in range(params.n) for j in range(i, params.n) if abs(mat[i][j]) > 1e-12 * scale]
+    return out
+
+
 def _full_hardware(params):
     if params.m != 1:
         return (f"the time-varying variant with {params.m} observations is model-only (compare, sweep, filter, "
@@ -552,7 +567,7 @@ VARIANT_SPECS = {
                       _steady_state, _steady_constants, _initial, steady_update, _steady_applies),
     "full": Variant("full", "time-varying gain: P, S and a restoring divider per update (two observations: "
                             "model only)", _full_state, _full_constants, _full_initial, full_update, _full_applies,
-                    _full_hardware),
+                    _full_hardware, _full_settled),
 }
 
 
@@ -633,11 +648,13 @@ def _ranges(params, stimulus=None):
 
 
 def _default_formats(params, ranges, *, operand_bits, state_frac):
-    err = _error_std(params)
-    # the registers' steps small against the float filter's own error of each state and prediction
+    err = _error_std(params, measurement_only=True)
+    # the registers' steps small against the float filter's error of each state and prediction
+    # (the part the measurement noise alone causes: its floor on any signal)
     noise = None
     if err:
         noise = {f"x{i + 1}": err[f"x{i + 1}"] for i in range(params.n)}
+        noise.update({f"xo{i + 1}": err[f"x{i + 1}"] for i in range(params.n)})  # x_i as F's operand
         noise.update({f"yh{j + 1}": err[f"yhat{j + 1}"] for j in range(params.m)})
     formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, noise=noise)
     # the innovation's step must be small against the observation noise it carries into every
@@ -781,8 +798,9 @@ PRESETS = {
 }
 
 
-def _error_std(params):
-    """Steady-state error of every state and every predicted observation, for the steady gain."""
+def _error_std(params, *, measurement_only=False):
+    """Steady-state error of every state and every predicted observation, for the steady gain
+    (``measurement_only``: the part the measurement noise alone causes, its floor on any signal)."""
     from kfpga.model.reference import steady_error_std
 
     try:
@@ -790,7 +808,7 @@ def _error_std(params):
     except (ValueError, PBHError):
         return None
     f, gqg, h, r = params.arrays()
-    states, predictions = steady_error_std(f, gqg, h, r, gain)
+    states, predictions = steady_error_std(f, 0 * gqg if measurement_only else gqg, h, r, gain)
     out = {f"x{i + 1}": float(v) for i, v in enumerate(states)}
     out.update({f"yhat{j + 1}": float(v) for j, v in enumerate(predictions)})
     return out

@@ -212,6 +212,21 @@ def _full_initial(params):
     return {**_initial(params), "p11": p11, "p12": p12, "p21": p21, "p22": p22}
 
 
+def _full_settled(params):
+    """The covariance the time-varying gain settles to, in datapath units (P' = D P D)."""
+    if not params.Q > 0:
+        return []
+    k, pl = steady_state_gain(params.T, params.Q, params.R)
+    d = np.diag([1.0, params.T])
+    c = np.array([[1.0, 0.0]])
+    p = (np.eye(2) - np.reshape(k, (2, 1)) @ c) @ pl
+    out = []
+    for name, m, point in (("P", d @ p @ d, "p"), ("Pl", d @ pl @ d, "pl")):
+        out += [(f"{name}{i + 1}{j + 1}", float(m[i][j]), point) for i in range(2) for j in range(2)
+                if abs(m[i][j]) > 1e-12 * np.max(np.abs(m))]
+    return out
+
+
 def _steady_applies(params):
     if not params.Q > 0:
         return f"model.Q = {params.Q!r}: the steady-state variant needs Q > 0 (Q = 0 gives K_inf = 0)"
@@ -223,7 +238,7 @@ VARIANT_SPECS = {
                       (("x1", "x1"), ("v", "v")), _steady_constants, _initial, steady_update, _steady_applies),
     "full": Variant("full", "time-varying gain: covariance and two restoring dividers per update",
                     (("x1", "x1"), ("v", "v"), ("p11", "p"), ("p12", "p"), ("p21", "p"), ("p22", "p")),
-                    _full_constants, _full_initial, full_update),
+                    _full_constants, _full_initial, full_update, settled=_full_settled),
 }
 
 
@@ -242,8 +257,9 @@ def _ranges(params, stimulus=None):
 
 
 def _default_formats(params, ranges, *, operand_bits, state_frac):
-    err = _error_std(params)
-    # the registers' steps small against the float filter's own error there (v = T x2)
+    err = _error_std(params, measurement_only=True)
+    # the registers' steps small against the float filter's error there (v = T x2), the part the
+    # measurement noise alone causes: the floor of that error on any signal
     noise = ({"x1": min(err["x1"], err["yhat"]), "v": params.T * err["x2"], "vt": params.T * err["x2"], "x2": err["x2"]}
              if err else None)
     formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, noise=noise)
@@ -313,12 +329,14 @@ def _goals(config, variant, channels=1):
             "worst_path_ns": WORST_PATH_GOAL_NS}
 
 
-def _error_std(params):
-    """Steady-state error of x1, x2 and the prediction yhat (physical units)."""
+def _error_std(params, *, measurement_only=False):
+    """Steady-state error of x1, x2 and the prediction yhat (physical units); with
+    ``measurement_only`` the part the measurement noise alone causes, a floor under the error
+    on any signal (a signal off the model only adds to it)."""
     if not params.Q > 0:
         return None
     f = np.array([[1.0, params.T], [0.0, 1.0]])
-    gqg = np.array([[0.0, 0.0], [0.0, params.Q]])
+    gqg = np.array([[0.0, 0.0], [0.0, 0.0 if measurement_only else params.Q]])
     k, _ = steady_state_gain(params.T, params.Q, params.R)
     (s1, s2), (sy,) = steady_error_std(f, gqg, [[1.0, 0.0]], [[params.R]], np.reshape(k, (2, 1)))
     return {"x1": s1, "x2": s2, "yhat": sy}

@@ -6,7 +6,8 @@ everywhere; narrow formats with wrap-around; a non-default P0 and x0), both vari
 stimuli each (stress codes, the sine and random-acceleration scenarios, six interleaved
 channels). They were recorded from the bit-accurate model and, for the stress and six-channel
 stimuli and every stimulus of the default config, from the RTL in the Amaranth simulator, which
-agreed on every integer.
+agreed on every integer. Every config names all its formats (those that were the defaults when
+it was recorded), so a change of the default-format rules does not move them.
 """
 
 import json

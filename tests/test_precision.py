@@ -2,7 +2,7 @@
 
 The grid of the issue: T in {0.001, 0.01, 0.1, 1, 8}, Q in {0.01, 2, 100}, R in {0.01, 4, 1000}
 on the paper's model (cv2) and the constant-acceleration model (ca3): the default formats either
-give a fixed RMSE of x1 within 1 % of float's, with no overflow, or the config is refused with
+give a fixed RMSE of x1 and of x2 within 1 % of float's, with no overflow, or the config is refused with
 one line that names the point (or says why the variant does not apply).
 """
 
@@ -12,11 +12,12 @@ import re
 import numpy as np
 import pytest
 
-from kfpga.analysis import compare
+from kfpga.analysis import compare, float_run, rmse
 from kfpga.config import ConfigError, FilterConfig
+from kfpga.fixedmodel import FixedModel
 from kfpga.model.kalman import StateSpaceParams
 from kfpga.model.reference import KalmanParams
-from kfpga.scenarios import for_config
+from kfpga.scenarios import SINE_AMPLITUDE, SINE_PERIOD, for_config
 
 GRID = list(itertools.product((0.001, 0.01, 0.1, 1.0, 8.0), (0.01, 2.0, 100.0), (0.01, 4.0, 1000.0)))
 
@@ -56,6 +57,12 @@ def test_defaults_are_within_one_percent_or_refused_naming_the_point(model, vari
         m = compare(config, variant, y, truth, limit_cycle=False).metrics
         assert m["overflows"] == 0, (where, m["overflow_points"])
         assert abs(m["rmse_fixed_over_float"] - 1) <= 0.01, (where, m["rmse_fixed_over_float"])
+        # x2, the rate: its truth is the sine's derivative per unit time (the scenario's own x2)
+        rate = SINE_AMPLITUDE * 2 * np.pi / (SINE_PERIOD * t) * np.cos(2 * np.pi * np.arange(len(truth)) / SINE_PERIOD)
+        bits = FixedModel(config, variant=variant)
+        fixed, flt = bits.to_float(bits.run(y))["x2"][100:], float_run(config, variant, y)["x2"][100:]
+        ratio = rmse(fixed, rate[100:]) / rmse(flt, rate[100:])
+        assert abs(ratio - 1) <= 0.01, (where, "x2", ratio)
         passed.append(where)
     assert passed, refused  # T = 1 and T = 8 (F's entries powers of two) run for every model
 
