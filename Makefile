@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 BUILD  := build
 
-.PHONY: demo test bench lint venv clean
+.PHONY: demo test bench lint venv clean cosim-long
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -36,6 +36,10 @@ demo: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python bench/bench_model.py
 	$(BIN)/python bench/bench_cosim.py
+
+# 20,000 whole-design estimates per variant on both simulators (about 15 min, Icarus the most)
+cosim-long: $(STAMP)
+	KFPGA_SYSTEM_SAMPLES=20000 $(BIN)/python -m pytest -n auto tests/test_cosim.py -k system_bit_exact
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
