@@ -9,9 +9,9 @@ import json
 import os
 
 import pytest
+from simulators import need
 
 from kfpga.sim.runner import SIMULATORS, build, run
-from kfpga.tools import simulator_available
 
 pytestmark = pytest.mark.cosim
 
@@ -21,14 +21,6 @@ pytestmark = pytest.mark.cosim
 SYSTEM_SAMPLES = {"verilator": 20000, "icarus": 5000}
 if os.environ.get("KFPGA_SYSTEM_SAMPLES"):
     SYSTEM_SAMPLES = dict.fromkeys(SYSTEM_SAMPLES, int(os.environ["KFPGA_SYSTEM_SAMPLES"]))
-
-
-def need(simulator):
-    ok, why = simulator_available(simulator)
-    if not ok:
-        if os.environ.get("CI") == "true":
-            pytest.fail(f"CI must run both simulators: {why}")
-        pytest.skip(why)
 
 
 def check(result, samples=None):

@@ -9,10 +9,10 @@ time-varying core, and cocotb on the generated Verilog on both simulators.
 """
 
 import dataclasses
-import os
 
 import numpy as np
 import pytest
+from simulators import need
 
 from kfpga import registry
 from kfpga.ads8364 import CODE_MAX, CODE_MIN
@@ -21,7 +21,6 @@ from kfpga.hw.kalman import FullCore, SteadyCore, default_stages
 from kfpga.model.kalman import SPEC
 from kfpga.sim.amaranth_streams import measure_timing, run_core
 from kfpga.sim.runner import SIMULATORS, build, run
-from kfpga.tools import simulator_available
 
 PRESET_CASES = [("ca3", "steady"), ("ca3", "full"), ("va2", "steady")]
 
@@ -124,11 +123,7 @@ def test_fewer_stages_are_bit_exact_too(stages, seed):
 @pytest.mark.parametrize("simulator", SIMULATORS)
 @pytest.mark.parametrize(("preset", "variant"), PRESET_CASES)
 def test_preset_cosimulation_is_bit_exact(preset, variant, simulator, seed):
-    ok, why = simulator_available(simulator)
-    if not ok:
-        if os.environ.get("CI") == "true":
-            pytest.fail(f"CI must run both simulators: {why}")
-        pytest.skip(why)
+    need(simulator)
     config = preset_config(preset)
     samples = 400 if variant == "full" else 1500
     result = run(build(simulator, "core", config=config, variant=variant, channels=3), "test_core",
@@ -149,11 +144,7 @@ def _two_observation_config(adc):
 def test_board_with_two_observations_is_bit_exact(simulator, adc, seed):
     """The whole design for va2: both observations' ADC channels sampled at one instant, one
     update per conversion with both samples (in either channel order), every estimate equal."""
-    ok, why = simulator_available(simulator)
-    if not ok:
-        if os.environ.get("CI") == "true":
-            pytest.fail(f"CI must run both simulators: {why}")
-        pytest.skip(why)
+    need(simulator)
     config = _two_observation_config(adc)
     channels = list(config.spec.adc_channels(config.params))
     result = run(build(simulator, "top", config=config, variant="steady"), "test_top", testcase="system_bit_exact",

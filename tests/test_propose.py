@@ -2,14 +2,13 @@
 simulate on both simulators, bit-exact)."""
 
 import json
-import os
 
 import pytest
+from simulators import need
 
 from kfpga.cli import main
 from kfpga.config import FilterConfig
 from kfpga.sim.runner import SIMULATORS
-from kfpga.tools import simulator_available
 
 pytestmark = pytest.mark.xdist_group("propose")  # one worker computes the shared proposal
 
@@ -51,11 +50,7 @@ def test_proposal_meets_its_constraints(proposal, capsys, seed):
 @pytest.mark.parametrize("simulator", SIMULATORS)
 def test_generate_and_simulate_take_the_proposal(proposal, simulator, capsys, tmp_path, seed):
     """(The benches bound every sample's wait, so a hung design fails rather than hangs.)"""
-    ok, why = simulator_available(simulator)
-    if not ok:
-        if os.environ.get("CI") == "true":
-            pytest.fail(f"CI must run both simulators: {why}")
-        pytest.skip(why)
+    need(simulator)
     code, _, err = run(capsys, "generate", "--config", str(proposal), "--out", str(tmp_path / "g"), "--no-lint")
     assert code == 0, err
     code, out, err = run(capsys, "simulate", "--config", str(proposal), "--samples", "300", "--seed", str(seed),

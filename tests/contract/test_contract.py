@@ -17,6 +17,7 @@ import os
 
 import numpy as np
 import pytest
+from simulators import need
 
 from kfpga import registry
 from kfpga.ads8364 import CODE_MAX, CODE_MIN
@@ -27,7 +28,7 @@ from kfpga.formats import MULTIPLIER_BITS
 from kfpga.hw.generate import write_block
 from kfpga.sim.amaranth_streams import measure_timing, run_core
 from kfpga.sim.runner import SIMULATORS, build, run
-from kfpga.tools import iverilog_parse, iverilog_path, simulator_available, verilator_lint
+from kfpga.tools import iverilog_parse, iverilog_path, verilator_lint
 
 ROUNDINGS = [r.value for r in Rounding]
 
@@ -146,11 +147,7 @@ def test_generated_verilog_parses_and_lints(name, variant, tmp_path):
 @pytest.mark.parametrize("simulator", SIMULATORS)
 @pytest.mark.parametrize(("name", "variant"), CASES)
 def test_cosimulation_is_bit_exact(name, variant, simulator, seed):
-    ok, why = simulator_available(simulator)
-    if not ok:
-        if os.environ.get("CI") == "true":
-            pytest.fail(f"CI must run both simulators: {why}")
-        pytest.skip(why)
+    need(simulator)
     config = FilterConfig(filter=name)
     result = run(build(simulator, "core", config=config, variant=variant, channels=3), "test_core",
                  params={"variant": variant, "seed": seed, "samples": 1500, "channels": 3, "p_idle": 0.2,
