@@ -32,13 +32,21 @@ from kfpga.sim.scoreboard import Scoreboard
 from kfpga.sim.sources import csv_source, scenario_source
 from kfpga.sim.streams import StreamSink, StreamSource
 
-__all__ = ["sim_params", "write_results", "AdcPins", "CoreTB", "SystemTB", "FrontendTB", "load_config"]
+__all__ = ["sim_params", "deadline", "write_results", "AdcPins", "CoreTB", "SystemTB", "FrontendTB", "load_config"]
 
 ENV = "KFPGA_SIM"
 
 
 def sim_params():
     return json.loads(os.environ.get(ENV, "{}"))
+
+
+def deadline(per_sample_us, *, default_samples, fixed_us=2000):
+    """``cocotb.test`` keyword arguments: a simulated-time limit from the run's sample count
+    (``per_sample_us`` each, ten times or more what a sample takes), so a bench whose design
+    stops answering fails instead of running on."""
+    n = max(int(sim_params().get("samples", default_samples)), default_samples)
+    return {"timeout_time": per_sample_us * n + fixed_us, "timeout_unit": "us"}
 
 
 def load_config(params):

@@ -7,10 +7,10 @@ conversion yields its words, in order, with the codes the ADC drove.
 import cocotb
 from cocotb.triggers import with_timeout
 
-from kfpga.sim.bench import FrontendTB, make_source, sim_params, write_results
+from kfpga.sim.bench import FrontendTB, deadline, make_source, sim_params, write_results
 
 
-@cocotb.test()
+@cocotb.test(**deadline(20, default_samples=60))
 async def pin_protocol(dut):
     p = sim_params()
     n = int(p.get("samples", 60))

@@ -8,10 +8,10 @@ from cocotb.simtime import get_sim_time
 from cocotb.triggers import ClockCycles, Edge, RisingEdge
 
 from kfpga.board import SYSTEM_PERIOD_NS
-from kfpga.sim.bench import sim_params, write_results
+from kfpga.sim.bench import deadline, sim_params, write_results
 
 
-@cocotb.test()
+@cocotb.test(**deadline(0, default_samples=0, fixed_us=100))  # 40 ADC periods take 8 us
 async def divider_ratio_and_duty(dut):
     p = sim_params()
     ratio = int(p.get("ratio", 10))

@@ -7,12 +7,12 @@ import numpy as np
 from cocotb.simtime import get_sim_time
 from cocotb.triggers import ClockCycles, with_timeout
 
-from kfpga.sim.bench import CoreTB, sim_params, write_results
+from kfpga.sim.bench import CoreTB, deadline, sim_params, write_results
 from kfpga.sim.sources import stress_codes
 from kfpga.sim.streams import pump
 
 
-@cocotb.test()
+@cocotb.test(**deadline(40, default_samples=2000))
 async def core_bit_exact(dut):
     """Every sample in, one estimate out, every integer equal to the model's.
 

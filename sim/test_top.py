@@ -6,7 +6,7 @@ import cocotb
 from cocotb.simtime import get_sim_time
 from cocotb.triggers import ClockCycles, FallingEdge, RisingEdge, Timer, with_timeout
 
-from kfpga.sim.bench import SystemTB, sim_params, write_results
+from kfpga.sim.bench import SystemTB, deadline, sim_params, write_results
 
 PERIOD_US = 0.2  # ADC CLK
 
@@ -48,7 +48,7 @@ def finish(tb, p, t0, **extra):
     return report
 
 
-@cocotb.test()
+@cocotb.test(**deadline(20, default_samples=500))
 async def system_bit_exact(dut):
     """The main regression: ``samples`` estimates, every one equal to the model's."""
     p = sim_params()
@@ -67,7 +67,7 @@ async def system_bit_exact(dut):
     assert report["timeout_flag"] == 0
 
 
-@cocotb.test()
+@cocotb.test(**deadline(20, default_samples=100))
 async def reset_mid_conversion(dut):
     p = sim_params()
     tb = await start(dut, p, 60)
@@ -81,7 +81,7 @@ async def reset_mid_conversion(dut):
     assert report["ok"] and outputs_after_reset(tb) >= 30, report  # nothing lost after the reset
 
 
-@cocotb.test()
+@cocotb.test(**deadline(20, default_samples=100))
 async def reset_mid_update(dut):
     p = sim_params()
     tb = await start(dut, p, 60)
@@ -97,7 +97,7 @@ async def reset_mid_update(dut):
     assert report["dropped_at_reset"] >= 1, report  # the sample being filtered was lost to the reset, by design
 
 
-@cocotb.test()
+@cocotb.test(**deadline(20, default_samples=100))
 async def missing_eoc_times_out_and_recovers(dut):
     p = sim_params()
     tb = await start(dut, p, 60)
@@ -113,7 +113,7 @@ async def missing_eoc_times_out_and_recovers(dut):
     assert len(after) >= 30  # nothing lost afterwards: every later read came out (ok above)
 
 
-@cocotb.test()
+@cocotb.test(**deadline(20, default_samples=100))
 async def glitch_sample(dut):
     p = dict(sim_params(), glitch=True)
     tb = await start(dut, p, 40)

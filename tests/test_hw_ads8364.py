@@ -190,6 +190,36 @@ def test_illegal_state_recovers(illegal, seed):
     assert h.periods[forced["period"] + 1] == (0, word(addr=4))
 
 
+@pytest.mark.parametrize("illegal", [22, 27, 31])
+def test_illegal_state_during_six_channel_reads_restarts_the_reads(illegal, seed):
+    """An upset in the middle of a six-channel read phase: the recovery starts over at channel 0
+    (the read index is reset), so every later conversion is read as A0..C1 in order."""
+    top = ControllerTop(six_channel=True)
+    h = Harness(top, codes_source(seed))
+    forced = {}
+
+    async def script(ctx, h):
+        await wait_outputs(ctx, h, 9)  # a conversion read, then three reads into the next
+        await wait_state(ctx, h, 20)  # READ0 of the fourth channel (index 3)
+        for _ in range(3):
+            await ctx.tick()
+        forced["outputs"] = len(h.outputs)
+        ctx.set(top.ctrl.state, illegal)
+        await wait_outputs(ctx, h, forced["outputs"] + 12)
+
+    h.run(script)
+    assert forced["outputs"] == 9
+    after = h.outputs[forced["outputs"]:]
+    assert [c for c, _ in after[:12]] == [0, 1, 2, 3, 4, 5] * 2
+    # each word is what the ADC drove for the address the controller set: a read index left
+    # at 3 would put channel numbers on the wrong samples
+    reads = [(r.channel, r.code) for r in h.adc.reads]
+    assert after[:12] == reads[len(reads) - len(h.outputs) + forced["outputs"]:][:12]
+    # the read addresses after the upset start at A0 again
+    addrs = [(w >> BITS["addr"]) & 7 for s, w in h.periods if s == 21]
+    assert addrs[-12:] == [0, 1, 2, 3, 4, 5] * 2
+
+
 def test_backpressure_loses_nothing(seed):
     top = ControllerTop(six_channel=True)
     h = Harness(top, codes_source(seed), p_ready=0.05, seed=seed)

@@ -8,6 +8,7 @@ from amaranth import ClockDomain, Elaboratable, Module
 from amaranth.sim import Simulator
 
 from kfpga.hw.clockdiv import ClockDivider
+from kfpga.sim.amaranth_streams import run_with_deadline
 
 
 class Top(Elaboratable):
@@ -36,7 +37,7 @@ def trace(ratio, cycles, reset_at=()):
             out.append((ctx.get(top.div.strobe), ctx.get(top.div.clk_out)))
 
     sim.add_testbench(bench)
-    sim.run()
+    run_with_deadline(sim, cycles + 10, period=2e-8)
     return out
 
 

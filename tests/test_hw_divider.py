@@ -9,6 +9,7 @@ from amaranth.sim import Simulator
 from kfpga.config import FilterConfig
 from kfpga.hw.divider import Divider
 from kfpga.hw.kalman2 import FullKalman
+from kfpga.sim.amaranth_streams import run_with_deadline
 
 
 def expected(dividend, divisor, n):
@@ -43,7 +44,8 @@ def run_divider(dut, requests, seed):
 
     sim.add_testbench(producer)
     sim.add_testbench(consumer)
-    sim.run()
+    # a hang fails: every request takes latency + 1 cycles, at the offered rates far fewer than this
+    run_with_deadline(sim, 20 * (dut.latency + 2) * len(requests) + 1000)
     return results
 
 
@@ -100,7 +102,7 @@ def test_divider_latency_is_constant():
             seen[label] = cycles
 
     sim.add_testbench(bench)
-    sim.run()
+    run_with_deadline(sim, 10 * (dut.latency + 2) * 3 + 100)  # three divisions
     assert set(seen.values()) == {dut.latency}, seen
 
 

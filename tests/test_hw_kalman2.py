@@ -90,6 +90,36 @@ def test_sticky_overflow_flag(variant):
     assert expected[-1] and not expected[0]
 
 
+# One point made narrow, so that it saturates on samples where no other point does: there the
+# estimate's flag comes from that point alone, and a core that dropped its flag would differ from
+# the model. (variant, params, point, int_bits of the narrowed point)
+FLAG_ALONE = {
+    "xl1": ("steady", KalmanParams(), "xl1", 16),
+    "x2 shift T=0.5": ("steady", KalmanParams(T=0.5), "x2", 16),
+    "x2 product T=0.3": ("steady", KalmanParams(T=0.3), "x2", 16),
+    "vt T=0.3": ("steady", KalmanParams(T=0.3), "vt", 14),
+    # P0 with p21 + p22 > S: the first K2 = pl21 / S is 1.2, beyond gain's Q1.f, so the
+    # divider saturates; nothing else does on that sample
+    "divider": ("full", KalmanParams(R=0.5, P0=[[1.0, -2.0], [-2.0, 5.0]]), "gain", 1),
+}
+
+
+@pytest.mark.parametrize("case", list(FLAG_ALONE))
+def test_each_overflow_flag_reaches_the_estimate_on_its_own(case, seed):
+    variant, params, point, int_bits = FLAG_ALONE[case]
+    base = FilterConfig(params=params, check_ranges=False)
+    fmt = base.formats[point]
+    config = FilterConfig(params=params, formats={**base.formats, point: QFormat(int_bits, fmt.frac_bits, fmt.rounding)},
+                          check_ranges=False)
+    y = stress_codes(1, 1200)  # fixed codes: the samples below are found in them, seed or not
+    points = FixedModel(config, variant=variant).run(y).overflow_points
+    others = np.logical_or.reduce([f for name, f in points.items() if name != point])
+    alone = points[point] & ~others
+    assert alone.any(), f"no sample saturates {point} alone"
+    report = run_core(config, variant, y, seed=seed, p_idle=0.2, p_ready=0.6)  # every flag against the model
+    assert report["got"]["overflow"][alone].all()
+
+
 @pytest.mark.parametrize("name", ["T=0.5 shift", "T=0.3 product"])
 def test_latency_with_the_rate_steps(variant, name):
     """T not a power of two: x2 = v (1/T) takes more steps (latency), no more cycles per update."""

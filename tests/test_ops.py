@@ -19,6 +19,7 @@ from kfpga.compiled import compile_stage
 from kfpga.fixed import QFormat
 from kfpga.hw.arith import AmaranthOps
 from kfpga.ops import FloatOps, FractionOps, IntOps, WidthOps
+from kfpga.sim.amaranth_streams import run_with_deadline
 from kfpga.spec import Constant
 
 SRC = QFormat(20, 6)  # the input of the one-write stages
@@ -82,7 +83,7 @@ def amaranth_run(stage, raws, src):
 
     sim = Simulator(m)
     sim.add_testbench(bench)
-    sim.run()
+    run_with_deadline(sim, len(raws) + 10, period=1e-9)
     return out
 
 
