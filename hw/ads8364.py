@@ -170,16 +170,17 @@ class ADS8364Controller(wiring.Component):
             "o": Out(stream.Signature(SampleLayout)),
             "timeout": Out(1),
         })
-        # visible to tests and waveforms
+        # visible to tests, waveforms and the formal properties (hw/properties.py)
         self.state = Signal(range(32), name="state")
+        self.restart = Signal(range(3), init=2, name="restart")  # 2: RESET low next in CONV0, 1: one idle period, 0: run
+        self.read_index = Signal(range(6), name="read_index")
+        self.eoc_seen = Signal(name="eoc_seen")
 
     def elaborate(self, platform):
         m = Module()
         state = self.state
-        restart = Signal(range(3), init=2)  # 2: RESET low next in CONV0, 1: one idle period, 0: run
-        read_index = Signal(range(6))
+        restart, read_index, eoc_seen = self.restart, self.read_index, self.eoc_seen
         periods = Signal(range(self.timeout_periods + 1))
-        eoc_seen = Signal()
         word = self.word
 
         # EOC: 2-FF synchroniser, then latch the falling edge (a half-period pulse between strobes)
@@ -204,6 +205,9 @@ class ADS8364Controller(wiring.Component):
         # on the next one
         at_limit = Signal()
         m.d.sync += at_limit.eq(periods >= self.timeout_periods - 1)
+        # the count stops at the limit: an upset that puts it beyond (its register has room up to
+        # the next power of two) cannot make it wrap round and delay the timeout
+        counted = Mux(periods >= self.timeout_periods, periods, periods + 1)
         m.d.comb += [next_state.eq(state), next_index.eq(read_index)]
 
         with m.If(self.strobe):
@@ -214,9 +218,9 @@ class ADS8364Controller(wiring.Component):
                         m.d.sync += [periods.eq(1), eoc_seen.eq(0)]
                 with m.Case(*range(1, CONV19)):
                     m.d.comb += next_state.eq(state + 1)
-                    m.d.sync += periods.eq(periods + 1)
+                    m.d.sync += periods.eq(counted)
                 with m.Case(CONV19):
-                    m.d.sync += periods.eq(periods + 1)
+                    m.d.sync += periods.eq(counted)
                     with m.If(eoc_seen):
                         m.d.comb += next_state.eq(READ0)
                     with m.Elif(at_limit):  # the EOC timeout: flag it, start over cleanly

@@ -48,6 +48,15 @@ class Divider(wiring.Component):
             "i": In(stream.Signature(self.request_layout)),
             "o": Out(stream.Signature(self.result_layout)),
         })
+        # the registers, visible to tests and to the formal properties (hw/properties.py)
+        n = quotient_bits
+        self.divisor = Signal(divisor_bits, name="divisor")
+        self.remainder = Signal(divisor_bits, name="remainder")  # always < divisor while dividing
+        self.low = Signal(n, name="low")  # dividend bits still to be brought down, MSB first
+        self.quotient = Signal(n, name="quotient")
+        self.overflowed = Signal(name="overflowed")
+        self.count = Signal(range(n + 1), name="count")
+        self.busy = Signal(name="busy")
 
     @property
     def latency(self):
@@ -57,13 +66,8 @@ class Divider(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         n = self.quotient_bits
-        divisor = Signal(self.divisor_bits)
-        remainder = Signal(self.divisor_bits)  # always < divisor while dividing
-        low = Signal(n)  # dividend bits still to be brought down, MSB first
-        quotient = Signal(n)
-        overflow = Signal()
-        count = Signal(range(n + 1))
-        busy = Signal()
+        divisor, remainder, low, quotient = self.divisor, self.remainder, self.low, self.quotient
+        overflow, count, busy = self.overflowed, self.count, self.busy
 
         m.d.comb += self.i.ready.eq(~busy & (~self.o.valid | self.o.ready))
         with m.If(self.o.valid & self.o.ready):

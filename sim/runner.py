@@ -71,8 +71,11 @@ def _locked(path):
             fcntl.flock(handle, fcntl.LOCK_UN)
 
 
-def build(simulator, design, *, config=None, root=DEFAULT_ROOT, waves=False, quiet=True, **opts):
-    """Generate ``design``'s Verilog and compile it for ``simulator`` (cached by content)."""
+def build(simulator, design, *, config=None, root=DEFAULT_ROOT, waves=False, quiet=True, verilog_text=None, **opts):
+    """Generate ``design``'s Verilog and compile it for ``simulator`` (cached by content).
+
+    ``verilog_text`` replaces the generated Verilog (same top level and ports), e.g. a mutant
+    of it (``kfpga/mutate.py``)."""
     from cocotb_tools.runner import VerilatorControlFile, get_runner
 
     ok, why = simulator_available(simulator)
@@ -82,6 +85,8 @@ def build(simulator, design, *, config=None, root=DEFAULT_ROOT, waves=False, qui
     root = Path(root).resolve()
     staging = root / "src" / f"{design}-{os.getpid()}"
     verilog, toplevel = _design_verilog(staging, design, config, opts)
+    if verilog_text is not None:
+        verilog.write_text(verilog_text)
     digest = hashlib.sha1(verilog.read_bytes() + simulator.encode() + bytes([waves])).hexdigest()[:10]
     build_dir = root / simulator / f"{design}-{digest}"
     if simulator == "verilator":

