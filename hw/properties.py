@@ -89,7 +89,8 @@ class ClockDividerProps(Harness):
 
     PROPERTIES: ClassVar[dict] = {
         "strobe period": "strobe comes exactly every `ratio` system cycles",
-        "ADC clock high and low": "clk_out is high ratio//2 cycles and low ratio - ratio//2, every period",
+        "ADC clock high and low": "clk_out is high ratio//2 cycles and low ratio - ratio//2, every period, and "
+                                  "rises right after each strobe (logic on the strobe moves with the ADC clock edge)",
     }
 
     def __init__(self, ratio=10, only=None):
@@ -128,6 +129,8 @@ class ClockDividerProps(Harness):
                 m.d.comb += Assert(Mux(before, run + 1 == high, run + 1 == low),
                                    "clk_out high ratio//2 and low ratio - ratio//2 cycles")
             m.d.comb += Assert((edges == 0) | (run + 1 <= max(high, low)), "no longer level run")
+            strobe_was = self.past(m, d.strobe, "strobe_was")
+            m.d.comb += Assert(~known | (strobe_was == (d.clk_out & ~before)), "clk_out rises the cycle after a strobe")
             m.d.comb += [Cover(changed & before & (edges != 0)), Cover(changed & ~before & (edges != 0))]
         return m
 
@@ -290,7 +293,7 @@ class ControllerProps(Harness):
             m.d.comb += Assert(hold | (low_strobes <= 1) | reset_pulse | rst, "never low for two periods")
             with m.If(fell & (falls != 0) & ~reset_pulse):
                 m.d.comb += Assert(since_fall >= 20, "no HOLD while a conversion runs")
-            m.d.comb += [Cover(rose & quiet & (low_strobes == 1)), Cover(fell & (falls >= 2) & ~reset_pulse)]
+            m.d.comb += [Cover(rose & quiet & (low_strobes == 1)), Cover(fell & (falls != 0) & ~reset_pulse)]
 
         if self.want("RD under CS"):
             m.d.comb += Assert(w.rd | ~w.cs, "RD low only while CS is low")
