@@ -79,8 +79,15 @@ def _cores():
             # what a core holds at most: a steady core its input register, one sample in the loop
             # (one channel: the next waits for the write-back), one per output step's register
             # and the output register; a time-varying core the update under way and its result
-            capacity = 3 + core.output_stages if hasattr(core, "stages") else 2
-            out.append((f"{spec.name} {variant} core", core.latency, core.cycles_per_update, capacity,
+            # and the cycles with o.ready high (and no input) after which nothing is left: a steady
+            # core lets its held samples into the loop one per cycles_per_update; a time-varying
+            # core finishes its update (its result register empties at once)
+            if hasattr(core, "stages"):
+                capacity = 3 + core.output_stages
+                drain = core.latency + (capacity - 1) * core.cycles_per_update + 2
+            else:
+                capacity, drain = 2, core.latency + 2
+            out.append((f"{spec.name} {variant} core", core.latency, drain, capacity,
                         lambda s=spec, c=config, v=variant: s.make_core(c, v)))
     return out
 
@@ -122,8 +129,7 @@ def jobs():
             else:
                 # one whole conversion after the reset sequence, and the next HOLD
                 out.append(Job(label, prop, make, "bmc", conversion + 16, conversion + 16))
-    for label, latency, _, capacity, make_core in _cores():
-        drain = latency + 2  # cycles with o.ready high and no input after which nothing is left
+    for label, latency, drain, capacity, make_core in _cores():
         for prop in p.StreamProps.PROPERTIES:
             out.append(Job(label, prop, lambda only, c=make_core, k=capacity, d=drain: p.StreamProps(c(), k, d, only=only),
                            "bmc", drain + latency + 4, drain + latency + 4))
