@@ -207,7 +207,8 @@ class ADS8364Controller(wiring.Component):
         m.d.sync += at_limit.eq(periods >= self.timeout_periods - 1)
         # the count stops at the limit: an upset that puts it beyond (its register has room up to
         # the next power of two) cannot make it wrap round and delay the timeout
-        counted = Mux(periods >= self.timeout_periods, periods, periods + 1)
+        counted = Signal.like(periods)  # one adder and compare for both states that count
+        m.d.comb += counted.eq(Mux(periods >= self.timeout_periods, periods, periods + 1))
         m.d.comb += [next_state.eq(state), next_index.eq(read_index)]
 
         with m.If(self.strobe):

@@ -131,8 +131,10 @@ def jobs():
                 out.append(Job(label, prop, make, "bmc", conversion + 16, conversion + 16))
     for label, latency, drain, capacity, make_core in _cores():
         for prop in p.StreamProps.PROPERTIES:
+            # the output contract needs a result made and held: one update; the others a drain too
+            depth = latency + 8 if prop == "output contract" else drain + latency + 4
             out.append(Job(label, prop, lambda only, c=make_core, k=capacity, d=drain: p.StreamProps(c(), k, d, only=only),
-                           "bmc", drain + latency + 4, drain + latency + 4))
+                           "bmc", depth, depth))
     return out
 
 
