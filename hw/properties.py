@@ -75,13 +75,14 @@ class Harness(Elaboratable):
         return ResetSignal("sync")
 
 
-def stream_contract(m, h, port, tag, reset):
-    """Asserts (for an output) that ``valid``, once high, stays high with the same payload
-    until ``ready``; returns the per-cycle handshake."""
-    held = h.past(m, port.valid & ~port.ready & ~reset, f"{tag}_held")
-    payload = Signal.like(port.payload.as_value(), name=f"{tag}_payload_was")
-    m.d.sync += payload.eq(port.payload.as_value())
-    return held, payload
+def assert_held(m, h, port, rst, what="o held until ready"):
+    """The stream contract of an output ``port``: ``valid``, once high, stays high with the same
+    payload until ``ready``. Returns ``held``: the word offered last cycle was not taken."""
+    held = h.past(m, port.valid & ~port.ready & ~rst, "o_held")
+    was = h.past(m, port.payload.as_value(), "o_payload_was")
+    with m.If(held & ~rst):
+        m.d.comb += Assert(port.valid & (port.payload.as_value() == was), what)
+    return held
 
 
 class ClockDividerProps(Harness):
@@ -196,10 +197,7 @@ class DividerProps(Harness):
                 m.d.comb += Assert(ovf == ~fits, "overflow iff d = 0 or n >= d << qbits")
             m.d.comb += [Cover(new & ovf & (req_d != 0)), Cover(new & ovf & (req_d == 0))]
         if self.want("stream contract"):
-            held = self.past(m, d.o.valid & ~d.o.ready & ~rst, "o_held")
-            was = self.past(m, d.o.payload.as_value(), "o_payload_was")
-            with m.If(held & ~rst):
-                m.d.comb += Assert(d.o.valid & (d.o.payload.as_value() == was), "o held until ready")
+            held = assert_held(m, self, d.o, rst)
             m.d.comb += Assert(owed <= 1, "one request at a time")
             with m.If(d.o.valid & ~rst):
                 m.d.comb += Assert(owed == 1, "a result only for a request")
@@ -300,10 +298,7 @@ class ControllerProps(Harness):
             m.d.comb += Cover(~w.rd)
 
         if self.want("one word per read"):
-            held = self.past(m, c.o.valid & ~c.o.ready & ~rst, "o_held")
-            was = self.past(m, c.o.payload.as_value(), "o_payload_was")
-            with m.If(held & ~rst):
-                m.d.comb += Assert(c.o.valid & (c.o.payload.as_value() == was), "no word overwritten")
+            held = assert_held(m, self, c.o, rst, "no word overwritten")
             rd_was = self.past(m, w.rd, "rd_was", init=1)
             new = c.o.valid & ~held
             # words made minus reads ended: a word is valid a cycle before its RD pulse ends
@@ -397,10 +392,7 @@ class StreamProps(Harness):
         with m.Else():
             m.d.sync += inflight.eq(inflight + take - give)
         if self.want("output contract"):
-            held = self.past(m, c.o.valid & ~c.o.ready & ~rst, "o_held")
-            out_was = self.past(m, c.o.payload.as_value(), "o_payload_was")
-            with m.If(held & ~rst):
-                m.d.comb += Assert(c.o.valid & (c.o.payload.as_value() == out_was), "o held until ready")
+            held = assert_held(m, self, c.o, rst)
             m.d.comb += Cover(held & ~rst & ready)
         if self.want("input only when free"):
             m.d.comb += Assert(rst | (inflight <= self.capacity), "no more in flight than the core holds")
