@@ -42,6 +42,7 @@ def test_a_planted_bug_fails_its_proof(warmed, tmp_path):
 
     def wrong(only):
         harness = ClockDividerProps(10, only=only)
+        harness.dut._MustUse__silence = True  # replaced, never built
         harness.dut = ClockDivider(ratio=9)
         return harness
 
