@@ -5,11 +5,22 @@ import time
 import cocotb
 import numpy as np
 from cocotb.simtime import get_sim_time
-from cocotb.triggers import ClockCycles, with_timeout
+from cocotb.triggers import ClockCycles, ReadOnly, RisingEdge, with_timeout
 
 from kfpga.sim.bench import CoreTB, deadline, sim_params, write_results
 from kfpga.sim.sources import stress_codes
 from kfpga.sim.streams import pump
+
+
+async def levels(dut, signal, cycles):
+    """The settled level of ``signal`` in each of the next ``cycles`` clock cycles."""
+    out = []
+    for _ in range(cycles):
+        await RisingEdge(dut.clk)
+        await ReadOnly()
+        out.append(int(signal.value))
+    await RisingEdge(dut.clk)
+    return out
 
 
 @cocotb.test(**deadline(40, default_samples=2000))
@@ -29,6 +40,7 @@ async def core_bit_exact(dut):
     else:
         channels = rng.integers(0, count, n) if count > 1 else np.zeros(n, dtype=int)
     await tb.reset()
+    sticky_at_start = await levels(dut, dut.overflow, 4)  # nothing has saturated yet
     start_ns = get_sim_time("ns")
     t0 = time.perf_counter()
     # one stress signal per input (a model with two observations gets two different ones)
@@ -44,6 +56,9 @@ async def core_bit_exact(dut):
     cycles = (get_sim_time("ns") - start_ns) / 20
     await ClockCycles(dut.clk, 40)
     extra = int(dut.o__valid.value)  # a further estimate waiting would be one too many
+    # the sticky flag: the OR of every estimate's flag since reset (the per-sample flags are the
+    # model's, checked below)
+    sticky_at_end = await levels(dut, dut.overflow, 4)
     for i, c in enumerate(channels):
         tb.scoreboard.add_input(c, {name: int(columns[name][i]) for name in names})
     for word in tb.sink.words:
@@ -53,5 +68,7 @@ async def core_bit_exact(dut):
     report.update({"samples": report["compared"], "wall_s": wall, "loop_s": tb.sink.loop_s,
                    "samples_per_s": n / tb.sink.loop_s, "cycles": cycles, "cycles_per_sample": cycles / n,
                    "extra_after_end": extra})
+    report.update({"sticky_at_start": sticky_at_start, "sticky_at_end": sticky_at_end})
     write_results(p, report)
     assert report["ok"] and not extra, report
+    assert sticky_at_start == [0] * 4 and sticky_at_end == [int(any(w["overflow"] for w in tb.sink.words))] * 4, report
