@@ -11,28 +11,23 @@ from __future__ import annotations
 import json
 import os
 import random
-import tomllib
 from pathlib import Path
-from typing import NamedTuple
 
 import cocotb
-import numpy as np
 from cocotb.clock import Clock
 from cocotb.simtime import get_sim_time
 from cocotb.triggers import ClockCycles, Edge, Event, FallingEdge, ReadOnly, RisingEdge, Timer
 
-from kfpga.ads8364 import CODE_MAX, CODE_MIN
-from kfpga.analysis import float_run, rmse, sqnr_db
 from kfpga.board import SYSTEM_PERIOD_NS
-from kfpga.config import FilterConfig
 from kfpga.hw.ads8364 import SampleLayout
 from kfpga.hw.layouts import input_layout, output_layout
 from kfpga.sim.ads8364 import ADS8364
 from kfpga.sim.scoreboard import Scoreboard
-from kfpga.sim.sources import csv_source, scenario_source
 from kfpga.sim.streams import StreamSink, StreamSource
+from kfpga.sim.system import SystemRecords, load_config, make_source, updates_of
 
-__all__ = ["sim_params", "deadline", "write_results", "AdcPins", "CoreTB", "SystemTB", "FrontendTB", "load_config"]
+__all__ = ["sim_params", "deadline", "write_results", "AdcPins", "CoreTB", "SystemTB", "FrontendTB", "load_config",
+           "make_source", "updates_of"]
 
 ENV = "KFPGA_SIM"
 
@@ -47,13 +42,6 @@ def deadline(per_sample_us, *, default_samples, fixed_us=2000):
     stops answering fails instead of running on."""
     n = max(int(sim_params().get("samples", default_samples)), default_samples)
     return {"timeout_time": per_sample_us * n + fixed_us, "timeout_unit": "us"}
-
-
-def load_config(params):
-    text = params.get("config_toml")
-    if not text:
-        return FilterConfig()
-    return FilterConfig.from_dict(tomllib.loads(text), source="config")
 
 
 def write_results(params, report):
@@ -121,25 +109,6 @@ class AdcPins:
             task.cancel()
 
 
-def make_source(params, count):
-    """The analog source named by the parameters (a scenario or a CSV replay), seeded."""
-    glitches = {}
-    if params.get("glitch"):
-        # full-scale spikes on the filtered channels at a few conversions
-        rng = random.Random(params["seed"])
-        for k in rng.sample(range(5, max(count, 10)), min(5, max(count - 5, 1))):
-            glitches[k] = (params.get("channel", 0) if not params.get("six") else rng.randrange(6),
-                           rng.choice([CODE_MAX, CODE_MIN]))
-    config = load_config(params)
-    adc = params.get("adc") or [params.get("channel") or 0]
-    if params.get("csv"):
-        source = csv_source(params["csv"], clip=params.get("clip", False), config=config, adc=adc)
-        source.glitches = glitches
-        return source
-    return scenario_source(params.get("scenario", "sine"), count, params["seed"], config.params, glitches=glitches,
-                           config=config, adc=adc)
-
-
 class CoreTB:
     """A filter core alone: stream source on ``i``, stream sink on ``o``, scoreboard."""
 
@@ -182,72 +151,24 @@ class FrontendTB:
         self.dut.rst.value = 0
 
 
-def _per_channel_float(config, variant, channels, codes, field):
-    """The float filter's ``field`` for each sample, each channel filtered on its own from reset
-    (``codes`` an array, or ``{input: array}``)."""
-    out = np.zeros(len(channels))
-    for ch in np.unique(channels):
-        idx = np.flatnonzero(channels == ch)
-        part = {k: v[idx] for k, v in codes.items()} if isinstance(codes, dict) else codes[idx]
-        out[idx] = float_run(config, variant, part)[field]
-    return out
-
-
-class Update(NamedTuple):
-    """The samples of one filter update: when the last came, its channel state, the codes
-    (an int, or ``{input: code}``), the conversion."""
-
-    time_ns: float
-    channel: int
-    codes: object
-    conversion: int
-
-
-def updates_of(reads, config, adc):
-    """The updates the ADC reads make: one per read for a one-input filter; for several inputs
-    one per conversion, of the reads of the inputs' channels ``adc``, when the last of them is
-    read (the hardware's order). Its channel is the first input's ADC channel."""
-    if len(config.inputs) == 1:
-        return [Update(r.time_ns, r.channel, r.code, r.conversion) for r in reads]
-    out, pending, conversion = [], {}, None
-    last = max(adc)
-    for r in reads:
-        if r.conversion != conversion:
-            pending, conversion = {}, r.conversion
-        if r.channel in adc:
-            pending[config.inputs[adc.index(r.channel)]] = r.code
-        if r.channel == last and len(pending) == len(adc):
-            out.append(Update(r.time_ns, adc[0], dict(pending), r.conversion))
-    return out
-
-
-class SystemTB:
-    """The whole design: ADC model on the pins, output-port monitor, scoreboard.
-
-    Every read the ADC model served is an input of the filter; every ``out_valid`` strobe is an
-    output. A reset splits both at its time: estimates in flight at the reset are dropped and
-    the model restarts from x0/P0, as the hardware does.
-    """
+class SystemTB(SystemRecords):
+    """The whole design with the Python ADC model on the pins and an output-port monitor; the
+    records and their check are :class:`~kfpga.sim.system.SystemRecords`'."""
 
     def __init__(self, dut, params, *, expected_conversions):
-        self.dut = dut
-        self.params = params
-        self.config = load_config(params)
-        self.variant = params["variant"]
-        self.six = bool(params.get("six"))
-        self.field = params.get("out_field") or self.config.spec.default_output
-        self.adc_channels = list(params.get("adc") or [params.get("channel") or 0])
-        dut._log.info(f"seed {params['seed']}")
-        self.source = make_source(params, expected_conversions)
+        self._setup(dut, params, expected_conversions)
         self.adc = ADS8364(self.source)
         self.pins = AdcPins(dut, self.adc)
-        self.outputs = []  # (time_ns, channel, out_data, sticky overflow flag)
-        self.resets = []  # times rst_n fell
         self._want = 0
         self._enough = Event()
-        self.progress_file = Path(params["results"] + ".progress") if params.get("results") else None
         dut.rst_n.value = 1
         Clock(dut.clk50, SYSTEM_PERIOD_NS, unit="ns").start()
+
+    def _setup(self, dut, params, expected_conversions):
+        self.dut = dut
+        dut._log.info(f"seed {params['seed']}")
+        self._setup_records(params, expected_conversions)
+        self.progress_file = Path(params["results"] + ".progress") if params.get("results") else None
 
     async def reset(self, cycles=4):
         self.resets.append(now_ns())
@@ -283,80 +204,8 @@ class SystemTB:
         self._enough.clear()
         await self._enough.wait()
 
-    def updates(self):
-        """The filter updates of the reads so far (:func:`updates_of`)."""
-        return updates_of(self.adc.reads, self.config, self.adc_channels)
-
-    def _error_vs_float(self):
-        """The hardware's output field against the float filter (and the truth) on the same samples."""
-        ups = self.updates()
-        n = min(len(self.outputs), len(ups))
-        if n == 0:
-            return {}
-        reads = ups[:n]
-        channels = np.array([r.channel for r in reads])
-        if isinstance(reads[0].codes, dict):
-            codes = {k: np.array([r.codes[k] for r in reads], dtype=np.int64) for k in self.config.inputs}
-            measured = self.config.spec.measured_input(self.config.params)
-            raw = codes[measured] if measured is not None else None
-        else:
-            codes = raw = np.array([r.codes for r in reads], dtype=np.int64)
-        fmt = self.config.output_format(self.field)
-        hw = fmt.to_float([o[2] for o in self.outputs[:n]])
-        flt = _per_channel_float(self.config, self.variant, channels, codes, self.field)
-        out = {
-            "max_abs_hw_minus_float": float(np.max(np.abs(hw - flt))),
-            "max_abs_hw_minus_float_lsb": float(np.max(np.abs(hw - flt)) / fmt.lsb),
-            "sqnr_db": sqnr_db(flt, hw),
-        }
-        truth = getattr(self.source, "truth", None)
-        if truth is not None:
-            k = np.array([r.conversion for r in reads]) % truth.shape[1]
-            t = truth[channels, k]
-            # each channel settles on its own: skip the first samples of every channel, not of the
-            # interleaved stream (which would leave five channels' starts in the figures)
-            rank = np.zeros(n, dtype=int)
-            for ch in np.unique(channels):
-                idx = np.flatnonzero(channels == ch)
-                rank[idx] = np.arange(len(idx))
-            settle = min(100, int(np.min(np.bincount(channels)[np.unique(channels)])) // 10)
-            w = rank >= settle
-            out.update({"rmse_raw": rmse(raw[w], t[w]) if raw is not None else None, "rmse_float": rmse(flt[w], t[w]),
-                        "rmse_hw": rmse(hw[w], t[w]), "settle_per_channel": settle})
-        return out
-
     def report(self, wall_s, *, pending_allowed=2):
-        """Scoreboard over everything so far, plus flags and speed."""
-        sb = Scoreboard(self.config, self.variant)
-        bounds = [*self.resets, float("inf")]
-        reads = self.updates()
-        outs = self.outputs
-        i = j = 0
-        for k, bound in enumerate(bounds):
-            if k:
-                sb.reset()
-            while i < len(reads) and reads[i].time_ns < bound:
-                sb.add_input(reads[i].channel, reads[i].codes)
-                i += 1
-            while j < len(outs) and outs[j][0] < bound:
-                _, ch, value, sticky = outs[j]
-                sb.add_output(channel=ch, sticky=sticky, **{self.field: value})
-                j += 1
-        result = sb.check(pending_allowed=pending_allowed)
-        if not self.resets:
-            result.update(self._error_vs_float())
-        result.update({
-            "samples": result["compared"],
-            "conversions": self.adc.conversions,
-            "eoc_pulses": self.adc.eoc_pulses,
-            "eocs_dropped": self.adc.eocs_dropped,
-            "timeout_flag": int(self.dut.out_timeout.value),
-            "overflow_flag": int(self.dut.out_overflow.value),
-            "resets": len(self.resets),
-            "sim_time_us": now_ns() / 1000.0,
-            "wall_s": wall_s,
-            "samples_per_s": result["compared"] / wall_s if wall_s > 0 else None,
-        })
-        return result
-
-
+        """The records' check (:meth:`SystemRecords.report`) with the design's flags as they are now."""
+        return super().report(wall_s, timeout_flag=int(self.dut.out_timeout.value),
+                              overflow_flag=int(self.dut.out_overflow.value), sim_time_us=now_ns() / 1000.0,
+                              pending_allowed=pending_allowed)

@@ -45,10 +45,18 @@ class Built:
 
 def _design_verilog(out_dir, design, config, opts):
     """Write the Verilog of ``design`` into ``out_dir``; returns ``(path, toplevel)``."""
-    if design == "top":
-        path, _ = write_top(out_dir, config, variant=opts["variant"], six_channel=opts.get("six", False),
-                            channel=opts.get("channel"))
-        return path, TOP_NAME
+    if design in ("top", "system"):
+        path, top = write_top(out_dir, config, variant=opts["variant"], six_channel=opts.get("six", False),
+                              channel=opts.get("channel"))
+        if design == "top":
+            return path, TOP_NAME
+        # the design and the ADS8364 model in the simulator (sim/hdl.py)
+        from kfpga.hw.top import out_width
+        from kfpga.sim import hdl
+
+        hdl.write_model(out_dir)
+        (out_dir / f"{hdl.COSIM_NAME}.v").write_text(hdl.cosim_wrapper(TOP_NAME, out_width(config, top.out_field)))
+        return path, hdl.COSIM_NAME
     if design == "core":
         path, _ = write_block(out_dir, "core", config, variant=opts["variant"], channels=opts.get("channels", 1))
     elif design == "divider":
@@ -56,7 +64,7 @@ def _design_verilog(out_dir, design, config, opts):
     elif design == "frontend":
         path, _ = write_block(out_dir, "frontend", six_channel=opts.get("six", False), channel=opts.get("channel", 0))
     else:
-        raise ValueError(f"design must be top, core, divider or frontend, not {design!r}")
+        raise ValueError(f"design must be top, system, core, divider or frontend, not {design!r}")
     return path, path.stem
 
 
@@ -87,7 +95,8 @@ def build(simulator, design, *, config=None, root=DEFAULT_ROOT, waves=False, qui
     verilog, toplevel = _design_verilog(staging, design, config, opts)
     if verilog_text is not None:
         verilog.write_text(verilog_text)
-    digest = hashlib.sha1(verilog.read_bytes() + simulator.encode() + bytes([waves])).hexdigest()[:10]
+    files = sorted(staging.glob("*.v"))
+    digest = hashlib.sha1(b"".join(f.read_bytes() for f in files) + simulator.encode() + bytes([waves])).hexdigest()[:10]
     build_dir = root / simulator / f"{design}-{digest}"
     if simulator == "verilator":
         os.environ.update(verilator_env())
@@ -99,11 +108,14 @@ def build(simulator, design, *, config=None, root=DEFAULT_ROOT, waves=False, qui
         shutil.rmtree(staging, ignore_errors=True)
         verilog = src / verilog.name
         runner = get_runner(simulator)
-        sources = [verilog]
+        sources = [src / f.name for f in files]
         build_args = []
         if simulator == "verilator":
             sources.append(VerilatorControlFile(src / "verilator_lint.vlt"))
             build_args = ["-O3", "--x-assign", "fast", "--x-initial", "fast", "-Wno-fatal"]
+            if design == "system":
+                # the wrapper's clock is a delay loop: Verilator's timing needs C++20 coroutines
+                build_args += ["--timing", "-CFLAGS", "-std=c++20 -fcoroutines"]
             if waves and verilator_fst():  # FST, as Icarus writes: compressed, a tenth of the VCD's size
                 build_args.append("--trace-fst")
         stamp = build_dir / ".built"

@@ -7,6 +7,7 @@ from cocotb.simtime import get_sim_time
 from cocotb.triggers import ClockCycles, FallingEdge, RisingEdge, Timer, with_timeout
 
 from kfpga.sim.bench import SystemTB, deadline, sim_params, write_results
+from kfpga.sim.system import conversions_for
 
 PERIOD_US = 0.2  # ADC CLK
 
@@ -19,10 +20,6 @@ def hold_pin(dut, p):
 
 def outputs_after_reset(tb):
     return sum(1 for o in tb.outputs if o[0] > tb.resets[-1])
-
-
-def conversions_for(p, samples):
-    return samples // 6 + 2 if p.get("six") else samples + 2  # several inputs: one update per conversion
 
 
 async def start(dut, p, samples):

@@ -1,0 +1,246 @@
+"""The whole design with its ADS8364 in the simulator: the Verilog model, its wrappers, and the
+files they read and write.
+
+``sim/ads8364_model.v`` models the ADC with every datasheet timing check, clocked by the system
+clock, so a co-simulation needs no call into Python per pin edge. Two wrappers put it next to
+the generated ``kfpga_top``:
+
+* :func:`cosim_wrapper` (``kfpga_cosim``, for the cocotb bench ``sim/test_system.py``): the
+  clock and reset come from cocotb; the six codes of each conversion stream in from
+  ``codes.hex``; every read the ADC serves and every estimate on the output port stream out to
+  ``reads.txt`` and ``outputs.txt``, which the bench compares with the bit-accurate model after
+  the run. Counters and flags are ports.
+* the self-checking testbench of ``kfpga testbench`` (:mod:`kfpga.sim.testbench`).
+
+Both set the model's timing parameters from :data:`kfpga.ads8364.TIMING`.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from kfpga.ads8364 import TIMING, figure
+from kfpga.board import SYSTEM_PERIOD_NS
+
+__all__ = ["MODEL_FILE", "MODEL_NAME", "COSIM_NAME", "ERRORS", "STATUS", "model_parameters", "model_instance",
+           "dut_instance", "write_model", "cosim_wrapper", "clock_top", "write_codes", "read_log", "error_text"]
+
+MODEL_FILE = "ads8364_model.v"
+MODEL_NAME = "kfpga_ads8364_model"
+COSIM_NAME = "kfpga_cosim"
+
+#: The model's violation numbers (E_* in ads8364_model.v): the figure each checks and what it is.
+ERRORS = {
+    1: ("tC1", "CLK period below the minimum"),
+    2: ("tW1", "CLK low time below the minimum"),
+    3: ("tW1", "CLK high time below the minimum"),
+    4: ("tHOLDL", "HOLDx low width below the minimum"),
+    5: ("tHOLDH", "HOLDx high width between conversions below the minimum"),
+    6: ("tD2", "HOLDx fell too soon after RESET rose"),
+    7: ("", "HOLDx fell while RESET is low"),
+    8: ("", "HOLDx fell during a conversion"),
+    9: ("tW4", "RESET low width below the minimum"),
+    10: ("", "A2..A0 changed while RD is low"),
+    11: ("", "A2..A0 changed in the same instant RD rose"),
+    12: ("tRDL", "RD low width below the minimum"),
+    13: ("", "WR went low: the controller must not write to the ADC"),
+    14: ("tD9", "A2..A0 setup before RD falls below the minimum"),
+    15: ("", "address 110/111 (cycle/FIFO mode) is not used by this controller"),
+}
+
+
+def error_text(code, at_ns=None):
+    symbol, text = ERRORS.get(int(code), ("", f"unknown violation {code}"))
+    where = f" at {at_ns} ns" if at_ns is not None else ""
+    return f"ADS8364{where}: {text}" + (f" ({symbol})" if symbol else "")
+
+
+def model_parameters(sample_ns=SYSTEM_PERIOD_NS):
+    """The model's parameters, in ns, from :data:`TIMING` (the CLK-period figures at 200 ns)."""
+    ns = {"TC1_NS": "tC1", "TW1_NS": "tW1", "THOLDL_NS": "tHOLDL", "THOLDH_NS": "tHOLDH", "TW4_NS": "tW4",
+          "TD2_NS": "tD2", "TD9_NS": "tD9", "TRDL_NS": "tRDL", "TACC_NS": "tACC"}
+    out = {"SAMPLE_NS": int(sample_ns), "CONV_CLOCKS": int(TIMING["tCONV"].value)}
+    for name, symbol in ns.items():
+        value = figure(symbol)
+        if value != int(value):
+            raise ValueError(f"{symbol} = {value} ns: the Verilog model takes whole nanoseconds")
+        out[name] = int(value)
+    return out
+
+
+def write_model(out_dir):
+    """Copy ``ads8364_model.v`` into ``out_dir``; returns its path."""
+    path = Path(out_dir) / MODEL_FILE
+    path.write_text(resources.files("kfpga.sim").joinpath(MODEL_FILE).read_text())
+    return path
+
+
+def model_instance(indent="    "):
+    """The instance of the model on the ``adc_*`` wires, with its parameters."""
+    params = ",\n".join(f"{indent}    .{k}({v})" for k, v in model_parameters().items())
+    return f"""{indent}{MODEL_NAME} #(
+{params}
+{indent}) adc (
+{indent}    .clk(clk50), .adc_clk(adc_clk), .hold_a_n(adc_hold_a_n), .hold_b_n(adc_hold_b_n),
+{indent}    .hold_c_n(adc_hold_c_n), .reset_n(adc_reset_n), .wr_n(adc_wr_n), .cs_n(adc_cs_n), .rd_n(adc_rd_n),
+{indent}    .addr(adc_addr), .eoc_n(adc_eoc_n), .data(adc_data), .next_codes(next_codes), .take(take),
+{indent}    .read_strobe(read_strobe), .read_channel(read_channel), .read_code(read_code),
+{indent}    .read_conversion(read_conversion), .conversions(conversions), .eoc_pulses(eoc_pulses),
+{indent}    .errors(errors), .first_error(first_error), .first_error_ns(first_error_ns)
+{indent});"""
+
+
+def dut_instance(top, out_width, indent="    "):
+    """The generated top level on wires of the same names."""
+    return f"""{indent}wire adc_clk, adc_hold_a_n, adc_hold_b_n, adc_hold_c_n, adc_eoc_n, adc_cs_n, adc_rd_n, adc_wr_n;
+{indent}wire adc_byte, adc_add, adc_reset_n, out_valid, out_overflow, out_timeout;
+{indent}wire [2:0] adc_addr, out_channel;
+{indent}wire [15:0] adc_data;
+{indent}wire signed [{out_width - 1}:0] out_data;
+{indent}{top} dut (
+{indent}    .clk50(clk50), .rst_n(rst_n), .adc_clk(adc_clk), .adc_hold_a_n(adc_hold_a_n),
+{indent}    .adc_hold_b_n(adc_hold_b_n), .adc_hold_c_n(adc_hold_c_n), .adc_eoc_n(adc_eoc_n), .adc_cs_n(adc_cs_n),
+{indent}    .adc_rd_n(adc_rd_n), .adc_wr_n(adc_wr_n), .adc_byte(adc_byte), .adc_add(adc_add),
+{indent}    .adc_reset_n(adc_reset_n), .adc_addr(adc_addr), .adc_data(adc_data), .out_data(out_data),
+{indent}    .out_channel(out_channel), .out_valid(out_valid), .out_overflow(out_overflow), .out_timeout(out_timeout)
+{indent});
+{indent}wire [95:0] next_codes;
+{indent}wire take, read_strobe;
+{indent}wire [2:0] read_channel;
+{indent}wire [15:0] read_code;
+{indent}wire [31:0] read_conversion, conversions, eoc_pulses, errors;
+{indent}wire [7:0] first_error;
+{indent}wire [63:0] first_error_ns;"""
+
+
+#: Why a run of ``kfpga_cosim`` ended (the last field of its summary line).
+STATUS = {0: "done", 1: "an ADS8364 timing violation", 2: "the ADC ran out of codes", 3: "the cycle limit"}
+
+
+def cosim_wrapper(top, out_width):
+    """``kfpga_cosim``: the design and the ADC model with file I/O, for the fast regressions
+    (:mod:`kfpga.sim.system`); its only port is the system clock.
+
+    Plusargs: ``+samples=N`` (stop after the N-th estimate), ``+max_cycles=N`` (stop there: a
+    design that stops answering ends the run), ``+progress=N`` (print ``progress K`` every N
+    estimates), ``+dir=PATH`` (the folder of ``codes.hex``, where ``reads.txt``, ``outputs.txt``
+    and ``summary.txt`` are written). The design is in reset for the first 4 cycles.
+    """
+    return f"""// The whole design with the ADS8364 model and file I/O, for the fast regressions
+// (kfpga/sim/system.py). Generated by kfpga; see sim/hdl.py.
+`timescale 1ns / 1ps
+`default_nettype none
+module {COSIM_NAME} (
+    input wire clk50
+);
+    reg rst_n = 1'b0;
+{dut_instance(top, out_width)}
+{model_instance()}
+
+    // codes.hex: one conversion per line, six 16-bit codes in hex (channel 0 first)
+    integer fc, fr, fo, fs, got;
+    reg [15:0] c0, c1, c2, c3, c4, c5;
+    reg [95:0] codes_q = 96'd0;
+    reg [8*1024:1] dir;
+    reg [63:0] want, max_cycles, step, cycle = 0, n_out = 0, n_reads = 0;
+    reg exhausted = 1'b0;
+    reg signed [63:0] out_value, read_value, read_origin;
+    assign next_codes = codes_q;
+    initial begin
+        if (!$value$plusargs("samples=%d", want)) want = 1000;
+        if (!$value$plusargs("max_cycles=%d", max_cycles)) max_cycles = 1000 * want + 100000;
+        if (!$value$plusargs("progress=%d", step)) step = 0;
+        if (!$value$plusargs("dir=%s", dir)) dir = ".";
+        fc = $fopen({{dir, "/codes.hex"}}, "r");
+        fr = $fopen({{dir, "/reads.txt"}}, "w");
+        fo = $fopen({{dir, "/outputs.txt"}}, "w");
+        fs = $fopen({{dir, "/summary.txt"}}, "w");
+        if (fc == 0 || fr == 0 || fo == 0 || fs == 0) begin
+            $display("kfpga_cosim: cannot open the files in %0s", dir);
+            $finish;
+        end
+        got = $fscanf(fc, "%h %h %h %h %h %h\\n", c0, c1, c2, c3, c4, c5);
+        codes_q = {{c5, c4, c3, c2, c1, c0}};
+    end
+
+    task finish;
+        input integer status;
+        begin
+            // n_out n_reads conversions eoc_pulses errors first_error first_error_ns exhausted
+            // out_overflow out_timeout cycles time_ns status
+            $fwrite(fs, "%0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d\\n", n_out + out_valid,
+                    n_reads + read_strobe, conversions,
+                    eoc_pulses, errors, first_error, first_error_ns, exhausted, out_overflow, out_timeout, cycle,
+                    $time, status);
+            $fclose(fr);
+            $fclose(fo);
+            $fclose(fs);
+            $finish;
+        end
+    endtask
+
+    always @(posedge clk50) begin
+        cycle <= cycle + 1;
+        if (cycle == 3) rst_n <= 1'b1;
+        if (take) begin
+            got = $fscanf(fc, "%h %h %h %h %h %h\\n", c0, c1, c2, c3, c4, c5);
+            if (got != 6) exhausted <= 1'b1;
+            codes_q <= {{c5, c4, c3, c2, c1, c0}};
+        end
+        // reads.txt: time (ns) channel code conversion; outputs.txt: time channel value sticky-overflow
+        if (read_strobe) begin
+            read_value = $signed(read_code);
+            read_origin = $signed(read_conversion);
+            $fwrite(fr, "%0d %0d %0d %0d\\n", $time, read_channel, read_value, read_origin);
+            n_reads <= n_reads + 1;
+        end
+        if (out_valid) begin
+            // through 64-bit signed variables: Verilator 5.048 printed a 26-bit $signed() argument of %d wrongly
+            out_value = out_data;
+            $fwrite(fo, "%0d %0d %0d %0d\\n", $time, out_channel, out_value, out_overflow);
+            n_out <= n_out + 1;
+            if (step != 0 && (n_out + 1) % step == 0) begin
+                $display("progress %0d", n_out + 1);
+                $fflush;
+            end
+        end
+        if (out_valid && n_out + 1 >= want) finish(0);
+        else if (errors != 0) finish(1);
+        else if (exhausted) finish(2);
+        else if (cycle >= max_cycles) finish(3);
+    end
+endmodule
+`default_nettype wire
+"""
+
+
+def clock_top(indent=""):
+    """``kfpga_cosim_clock``: ``kfpga_cosim`` with its clock, for an event-driven simulator (Icarus)."""
+    half = SYSTEM_PERIOD_NS / 2
+    return f"""// The system clock for kfpga_cosim in an event-driven simulator. Generated by kfpga.
+`timescale 1ns / 1ps
+module {COSIM_NAME}_clock;
+    reg clk50 = 1'b0;
+    always #{half:g} clk50 = ~clk50;
+    {COSIM_NAME} cosim (.clk50(clk50));
+endmodule
+"""
+
+
+def write_codes(path, codes):
+    """``codes.hex``: the (conversions, 6) signed codes, one conversion per line, in hex."""
+    codes = np.asarray(codes, dtype=np.int64) & 0xFFFF
+    lines = "\n".join(" ".join(f"{c:04x}" for c in row) for row in codes)
+    Path(path).write_text(lines + "\n")
+
+
+def read_log(path, columns):
+    """A log the wrappers write (whitespace-separated integers) as an ``(n, columns)`` int64 array."""
+    text = Path(path).read_text()
+    values = np.array(text.split(), dtype=np.int64) if text.strip() else np.zeros(0, dtype=np.int64)
+    if values.size % columns:
+        raise ValueError(f"{path}: {values.size} numbers, not a multiple of {columns}")
+    return values.reshape(-1, columns)
