@@ -705,6 +705,7 @@ def _run_simulate(args):
     from tqdm import tqdm
 
     from kfpga.ads8364 import CHANNELS
+    from kfpga.sim import system
     from kfpga.sim.runner import SimulationFailed, build, run
     from kfpga.tools import simulator_available
 
@@ -739,10 +740,16 @@ def _run_simulate(args):
               "adc": list(args.adc) if args.adc else None, "samples": args.samples,
               "seed": args.seed, "scenario": args.scenario, "csv": str(Path(args.input).resolve()) if args.input else None,
               "config_toml": config.to_toml()}
+    python_adc = args.adc_model == "python"
+    if args.waves and not python_adc:
+        raise UsageError("--waves needs --adc-model python: the waveforms come from the cocotb bench")
     t0 = time.perf_counter()
     _info(f"building the {args.variant} design for {args.simulator} (cached under build/sim) ...")
-    built = build(args.simulator, "top", config=config, variant=args.variant, six=six, channel=args.channel,
-                  waves=args.waves)
+    if python_adc:
+        built = build(args.simulator, "top", config=config, variant=args.variant, six=six, channel=args.channel,
+                      waves=args.waves)
+    else:
+        built = system.build(args.simulator, config=config, variant=args.variant, six=six, channel=args.channel)
     build_s = time.perf_counter() - t0
     bar = tqdm(total=args.samples, desc="co-simulation", unit="sample", file=sys.stderr, disable=args.quiet)
 
@@ -751,10 +758,14 @@ def _run_simulate(args):
 
     t1 = time.perf_counter()
     try:
-        result = run(built, "test_top", testcase="system_bit_exact", params=params, waves=args.waves,
-                     on_progress=progress, tag=f"simulate-{args.seed}")
+        if python_adc:
+            result = run(built, "test_top", testcase="system_bit_exact", params=params, waves=args.waves,
+                         on_progress=progress, tag=f"simulate-{args.seed}")
+        else:
+            result = system.run(built, params=params, samples=args.samples, on_progress=progress,
+                                tag=f"simulate-{args.seed}")
         failed = None
-    except SimulationFailed as exc:
+    except (SimulationFailed, system.SystemRunFailed) as exc:
         result, failed = {}, str(exc)
     bar.update(args.samples - bar.n if not failed else 0)
     bar.close()
@@ -778,7 +789,8 @@ def _run_simulate(args):
         waves.append(str(dest))
     summary = {
         "samples": result["compared"], "mismatches": result["mismatches"], "simulator": args.simulator,
-        "variant": args.variant, "channels": args.channels, "seed": args.seed, "wall_s": wall, "build_s": build_s,
+        "variant": args.variant, "channels": args.channels, "seed": args.seed, "adc_model": args.adc_model,
+        "wall_s": wall, "build_s": build_s,
         "samples_per_s": result["compared"] / wall if wall else None,
         **{k: result.get(k) for k in ("max_abs_hw_minus_float", "max_abs_hw_minus_float_lsb", "sqnr_db", "rmse_raw",
                                       "rmse_float", "rmse_hw", "conversions", "timeout_flag", "overflow_flag",
@@ -985,7 +997,13 @@ def build_parser():
     p.add_argument("--seed", type=_seed, metavar="S", help="noise seed of the ADC inputs (default: random, printed)")
     p.add_argument("--scenario", choices=("sine", "random-accel"), help="ADC input signal (default: sine)")
     p.add_argument("--input", metavar="CSV", help="replay a CSV on the ADC inputs: y0..y5, or y on all six")
-    p.add_argument("--waves", action="store_true", help="dump waveforms (slower) and copy them under build/waves/")
+    p.add_argument("--adc-model", choices=("verilog", "python"), default="verilog",
+                   help="verilog: the ADS8364 model runs in the simulator with the design, no Python per clock edge "
+                        "(fast); python: the cocotb bench, whose Python ADS8364 model reacts to every pin edge "
+                        "(about 20x slower on Verilator). Both check every datasheet timing figure on every "
+                        "conversion (default: verilog)")
+    p.add_argument("--waves", action="store_true",
+                   help="dump waveforms (slower) and copy them under build/waves/; with --adc-model python")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_run_simulate)

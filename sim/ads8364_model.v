@@ -133,14 +133,14 @@ module kfpga_ads8364_model #(
 
     // the bus: the code latched when the read started, once TACC_NS have passed (strictly: a
     // controller sampling at the very instant would race the data)
-    wire [15:0] start_code = registers[addr];
+    wire [15:0] start_code = (addr <= 3'd5) ? registers[addr] : 16'd0;  // 110, 111: no register
     wire [63:0] read_elapsed_ns = read_start ? SAMPLE_NS : (cycle - t_read + 1) * SAMPLE_NS;
     assign data = (reading && read_elapsed_ns > TACC_NS) ? (read_start ? start_code : code_q) : 16'd0;
 
     assign read_strobe = read_start & (addr <= 3'd5);
     assign read_channel = addr;
     assign read_code = start_code;
-    assign read_conversion = origin[addr];
+    assign read_conversion = (addr <= 3'd5) ? origin[addr] : 32'hffff_ffff;
 
     // the time in ns from an event (at the clk edge before period t) to the last clk edge
     function [63:0] since;

@@ -25,6 +25,7 @@ import os
 import random
 import shutil
 import subprocess
+import threading
 import time
 from dataclasses import dataclass
 from importlib import resources
@@ -339,14 +340,16 @@ def run(built, *, params, samples, on_progress=None, tag=None, timeout_s=None):
     t0 = time.perf_counter()
     codes = np.array([records.source.next() for _ in range(conversions)], dtype=np.int64)
     hdl.write_codes(run_dir / "codes.hex", codes)
-    # generous: a conversion with one read takes 230 system cycles, with six 380
-    per_sample = 600 if (built.six or len(records.adc_channels) > 1) else 300
-    max_cycles = per_sample * samples + 20000
+    max_cycles = cycle_budget(built, records, samples)
     step = max(samples // 100, 1)
     cmd = [*built.command, f"+samples={samples}", f"+max_cycles={max_cycles}", f"+progress={step}", f"+dir={run_dir}"]
     t1 = time.perf_counter()
     tail = collections.deque(maxlen=40)
+    if timeout_s is None:  # wall seconds: ten times what the slower simulator needs, and then some
+        timeout_s = 120 + samples * (0.07 if built.simulator == "icarus" else 0.001)
     with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=run_dir) as proc:
+        watchdog = threading.Timer(timeout_s, proc.kill)
+        watchdog.start()
         try:
             for line in proc.stdout:
                 if line.startswith("progress "):
@@ -354,10 +357,12 @@ def run(built, *, params, samples, on_progress=None, tag=None, timeout_s=None):
                         on_progress(int(line.split()[1]))
                 else:
                     tail.append(line.rstrip())
-            proc.wait(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            raise SystemRunFailed(f"{built.simulator}: no end after {timeout_s} s") from None
+            proc.wait()
+        finally:
+            expired = not watchdog.is_alive() and proc.returncode is not None and proc.returncode < 0
+            watchdog.cancel()
+    if expired:
+        raise SystemRunFailed(f"{built.simulator}: no end after {timeout_s:.0f} s; stopped")
     sim_wall = time.perf_counter() - t1
     (run_dir / "sim.log").write_text("\n".join(tail) + "\n")
     summary_path = run_dir / "summary.txt"
@@ -385,6 +390,13 @@ def run(built, *, params, samples, on_progress=None, tag=None, timeout_s=None):
                    "adc_errors": errors, "wall_total_s": time.perf_counter() - t0, "run_dir": str(run_dir),
                    "updates": len(records.updates())})
     return report
+
+
+def cycle_budget(built, records, samples):
+    """System cycles a run may take before it is stopped: generous, as a conversion with one
+    read takes 230 system cycles, six reads 380 (for six estimates)."""
+    per_sample = 600 if len(records.adc_channels) > 1 else 300
+    return per_sample * samples + 20000
 
 
 class _AdcCounts(NamedTuple):

@@ -11,14 +11,17 @@ import os
 import pytest
 from simulators import need
 
+from kfpga.sim import system
 from kfpga.sim.runner import SIMULATORS, build, run
 
 pytestmark = pytest.mark.cosim
 
-#: Estimates per variant per simulator through the whole system (single channel).
-# whole-design estimates per variant: Verilator runs 20,000; Icarus, about six times slower,
-# 5,000 in `make test` and 20,000 in `make cosim-long` (KFPGA_SYSTEM_SAMPLES sets both)
-SYSTEM_SAMPLES = {"verilator": 20000, "icarus": 5000}
+#: Estimates per variant per simulator through the whole system (single channel), with the ADC
+# model in the simulator (kfpga.sim.system); Icarus is about seventy times slower than Verilator.
+# KFPGA_SYSTEM_SAMPLES sets both.
+SYSTEM_SAMPLES = {"verilator": 100000, "icarus": 5000}
+#: The same through the cocotb bench, whose Python ADC model reacts to every pin edge.
+PYTHON_ADC_SAMPLES = {"verilator": 3000, "icarus": 500}
 if os.environ.get("KFPGA_SYSTEM_SAMPLES"):
     SYSTEM_SAMPLES = dict.fromkeys(SYSTEM_SAMPLES, int(os.environ["KFPGA_SYSTEM_SAMPLES"]))
 
@@ -76,24 +79,57 @@ def test_controller_pin_protocol(simulator, six, seed):
 @pytest.mark.slow
 @pytest.mark.parametrize("variant", ["steady", "full"])
 def test_system_bit_exact(simulator, variant, seed):
-    """20,000 estimates per variant on Verilator, 5,000 on Icarus (20,000 with ``make cosim-long``)
-    through divider + controller + core."""
+    """100,000 estimates per variant on Verilator, 5,000 on Icarus, through divider + controller
+    + core, with the Verilog ADS8364 model checking every timing figure."""
     samples = SYSTEM_SAMPLES[simulator]
-    result = run(build(simulator, "top", variant=variant, channel=1), "test_top", testcase="system_bit_exact",
-                 params={"variant": variant, "seed": seed, "samples": samples, "channel": 1})
+    result = system.run(system.build(simulator, variant=variant, channel=1), params={"seed": seed, "channel": 1},
+                        samples=samples)
     print(f"{result['samples']} estimates, {result['wall_s']:.1f} s on {simulator}")
     check(result, samples)
+    assert result["outputs"] == samples and result["adc_errors"] == 0
+    assert result["conversions"] >= samples and result["reads"] >= samples
     assert result["rmse_hw"] <= 1.01 * result["rmse_float"]
 
 
 @pytest.mark.parametrize("variant", ["steady", "full"])
+def test_system_bit_exact_python_adc(simulator, variant, seed):
+    """The same through the cocotb bench and the Python ADS8364 model: the two ADC models and the
+    two ways of running agree on the same design."""
+    samples = PYTHON_ADC_SAMPLES[simulator]
+    result = run(build(simulator, "top", variant=variant, channel=1), "test_top", testcase="system_bit_exact",
+                 params={"variant": variant, "seed": seed, "samples": samples, "channel": 1})
+    check(result, samples)
+
+
+@pytest.mark.parametrize("variant", ["steady", "full"])
 def test_system_six_channels(simulator, variant, seed):
-    result = run(build(simulator, "top", variant=variant, six=True), "test_top", testcase="system_bit_exact",
-                 params={"variant": variant, "seed": seed, "samples": 3000, "six": True})
-    check(result, 3000)
+    samples = 30000 if simulator == "verilator" else 3000
+    result = system.run(system.build(simulator, variant=variant, six=True), params={"seed": seed}, samples=samples)
+    check(result, samples)
     # each channel settles on its own: the figures skip every channel's start, not the stream's
-    assert result["settle_per_channel"] == 50
+    assert result["settle_per_channel"] == (100 if simulator == "verilator" else 50)
     assert result["rmse_hw"] <= 1.01 * result["rmse_float"] < result["rmse_raw"]
+    assert abs(result["reads"] - 6 * result["conversions"]) <= 6  # six reads per conversion
+
+
+def test_fast_regression_sees_a_wrong_model(seed):
+    """The fast path can fail: the design built with R = 0.5, the model told R = 2, differ."""
+    need("verilator")
+    from kfpga.config import FilterConfig
+
+    built = system.build("verilator", config=FilterConfig(), variant="steady", channel=1)
+    other = FilterConfig.from_dict({"model": {"R": 2.0}}, source="test")
+    result = system.run(built, params={"seed": seed, "channel": 1, "config_toml": other.to_toml()}, samples=500)
+    assert result["mismatches"] > 0 and not result["ok"]
+
+
+def test_fast_regression_stops_at_the_cycle_limit(seed, monkeypatch):
+    """A design that stops answering ends the run with the reason, not a hang."""
+    need("icarus")
+    built = system.build("icarus", variant="steady", channel=1)
+    monkeypatch.setattr(system, "cycle_budget", lambda built, records, samples: 2000)
+    with pytest.raises(system.SystemRunFailed, match="cycle limit"):
+        system.run(built, params={"seed": seed, "channel": 1}, samples=50)
 
 
 @pytest.mark.parametrize("case", ["reset_mid_conversion", "reset_mid_update", "missing_eoc_times_out_and_recovers",
