@@ -698,23 +698,10 @@ def _run_resources(args):
 # -- simulate --------------------------------------------------------------------------------
 
 
-def _run_simulate(args):
-    import shutil
-    import time
-
-    from tqdm import tqdm
-
-    from kfpga.ads8364 import CHANNELS
-    from kfpga.sim import system
-    from kfpga.sim.runner import SimulationFailed, build, run
-    from kfpga.tools import simulator_available
-
-    _check_channel(args)
-    config = _load_config(args, hardware=True)
-    _check_channel(args, config)
-    ok, why = simulator_available(args.simulator)
-    if not ok:
-        raise UsageError(f"{args.simulator} is not available: {why}")
+def _adc_source_params(args, config):
+    """The ADC inputs of simulate and testbench: a scenario with a seed, or a CSV replay; sets
+    ``args.samples`` (default 2000, or every row of the CSV) and ``args.seed``; returns the
+    bench parameters."""
     if args.input:
         from kfpga.sim.sources import csv_source
 
@@ -735,11 +722,31 @@ def _run_simulate(args):
         args.scenario = args.scenario or "sine"
         args.seed = _pick_seed(args.seed)
         _info(f"seed {args.seed} (replay with --seed {args.seed})")
+    return {"variant": args.variant, "six": args.channels == 6, "channel": args.adc[0] if args.adc else None,
+            "adc": list(args.adc) if args.adc else None, "samples": args.samples,
+            "seed": args.seed, "scenario": args.scenario, "csv": str(Path(args.input).resolve()) if args.input else None,
+            "config_toml": config.to_toml()}
+
+
+def _run_simulate(args):
+    import shutil
+    import time
+
+    from tqdm import tqdm
+
+    from kfpga.ads8364 import CHANNELS
+    from kfpga.sim import system
+    from kfpga.sim.runner import SimulationFailed, build, run
+    from kfpga.tools import simulator_available
+
+    _check_channel(args)
+    config = _load_config(args, hardware=True)
+    _check_channel(args, config)
+    ok, why = simulator_available(args.simulator)
+    if not ok:
+        raise UsageError(f"{args.simulator} is not available: {why}")
+    params = _adc_source_params(args, config)
     six = args.channels == 6
-    params = {"variant": args.variant, "six": six, "channel": args.adc[0] if args.adc else None,
-              "adc": list(args.adc) if args.adc else None, "samples": args.samples,
-              "seed": args.seed, "scenario": args.scenario, "csv": str(Path(args.input).resolve()) if args.input else None,
-              "config_toml": config.to_toml()}
     python_adc = args.adc_model == "python"
     if args.waves and not python_adc:
         raise UsageError("--waves needs --adc-model python: the waveforms come from the cocotb bench")
@@ -819,6 +826,46 @@ def _run_simulate(args):
         for w in waves:
             print(f"  waveforms: {w}")
     return 0 if summary["mismatches"] == 0 else 1
+
+
+# -- testbench -------------------------------------------------------------------------------
+
+
+def _run_testbench(args):
+    from kfpga.sim.testbench import run_icarus, write_testbench
+    from kfpga.tools import simulator_available
+
+    _check_channel(args)
+    config = _load_config(args, hardware=True)
+    _check_channel(args, config)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {args.out} is a file, not a folder")
+    if args.run_icarus:
+        ok, why = simulator_available("icarus")
+        if not ok:
+            raise UsageError(f"--run-icarus: {why}")
+    params = _adc_source_params(args, config)
+    _info(f"writing the testbench of {args.samples} estimates into {out} ...")
+    info = write_testbench(out, config, variant=args.variant, six=args.channels == 6, channel=args.channel,
+                           samples=args.samples, params=params)
+    result = {**info, "out": str(out)}
+    if args.run_icarus:
+        _info("running it on Icarus ...")
+        code, text = run_icarus(out)
+        lines = [ln for ln in text.splitlines() if ln.startswith(("PASS", "FAIL"))]
+        result.update({"icarus_exit": code, "icarus_result": lines[-1] if lines else text.strip()[-300:]})
+    if args.json:
+        _emit_json(result)
+    else:
+        print(f"kfpga testbench: {info['filter']} filter, {info['variant']} core, {info['channels']}, "
+              f"{info['samples']} estimates, in {out}/")
+        print(f"  files: {', '.join(info['files'])}")
+        print(f"  ModelSim-Altera:  cd {out} && vsim -c -do run_modelsim.do")
+        print(f"  Icarus:           {out}/run_icarus.sh")
+        if args.run_icarus:
+            print(f"  Icarus run: {result['icarus_result']} (exit {result['icarus_exit']})")
+    return 0 if not args.run_icarus or result["icarus_exit"] == 0 else 1
 
 
 # -- filters ---------------------------------------------------------------------------------
@@ -1007,6 +1054,26 @@ def build_parser():
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_run_simulate)
+
+    p = sub.add_parser("testbench", help="write a self-checking Verilog testbench (ModelSim-Altera, Icarus)",
+                       description="Write a plain Verilog-2001 testbench of the generated design into a folder: the "
+                                   "design, a behavioural ADS8364 that replays the ADC codes and checks the datasheet "
+                                   "timing, the codes and the model's expected outputs as $readmemh files, a "
+                                   "ModelSim .do script and an Icarus script. The testbench compares every estimate "
+                                   "with the bit-accurate model and ends with PASS or FAIL and an exit status. "
+                                   "Exit code 0: written (and, with --run-icarus, passed); 1: the Icarus run failed; "
+                                   "2: bad arguments.")
+    _add_design_args(p, "filter one channel or all six (default: 1)")
+    p.add_argument("--channel", type=_adc_channel, metavar="CH", help="channel of --channels 1 (default: A0)")
+    p.add_argument("--out", required=True, metavar="DIR", help="the folder to write (created if needed)")
+    p.add_argument("--samples", type=_positive_int, metavar="N",
+                   help="estimates to check (default: 2000, or every row of --input; at most those)")
+    p.add_argument("--seed", type=_seed, metavar="S", help="noise seed of the ADC inputs (default: random, printed)")
+    p.add_argument("--scenario", choices=("sine", "random-accel"), help="ADC input signal (default: sine)")
+    p.add_argument("--input", metavar="CSV", help="replay a CSV on the ADC inputs: y0..y5, or y on all six")
+    p.add_argument("--run-icarus", action="store_true", help="also compile and run it with Icarus Verilog")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_run_testbench)
     return parser
 
 
