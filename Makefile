@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 BUILD  := build
 
-.PHONY: demo test bench lint venv clean cosim-long formal mutate regress
+.PHONY: demo test bench lint venv clean formal mutate regress
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -37,10 +37,6 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_model.py
 	$(BIN)/python bench/bench_cosim.py
 
-# 20,000 whole-design estimates per variant on both simulators (about 15 min, Icarus the most)
-cosim-long: $(STAMP)
-	KFPGA_SYSTEM_SAMPLES=20000 $(BIN)/python -m pytest -n auto tests/test_cosim.py -k system_bit_exact
-
 # the formal properties of hw/properties.py, proven with SymbiYosys; prints the table (about 15 min on 2 cores)
 formal: $(STAMP)
 	$(BIN)/python -m kfpga.formal
@@ -49,11 +45,18 @@ formal: $(STAMP)
 mutate: $(STAMP)
 	$(BIN)/python -m kfpga.mutate
 
-# long regressions: 10^6 whole-design estimates per variant on Verilator, 10^5 on Icarus, each with
-# its own seed (printed), 0 mismatches or a non-zero exit
+# long regressions: 10^6 whole-design estimates per variant on Verilator, in one-channel and in
+# six-channel mode, and 10^5 per variant on Icarus, each with its own seed (printed); 0 mismatches
+# or a non-zero exit (about 30 minutes on 2 cores, see README)
+REGRESS_VERILATOR ?= 1000000
+REGRESS_ICARUS ?= 100000
 regress: $(STAMP)
-	for v in steady full; do $(BIN)/kfpga simulate --variant $$v --simulator verilator --samples $(or $(REGRESS_VERILATOR),1000000) || exit 1; done
-	for v in steady full; do $(BIN)/kfpga simulate --variant $$v --simulator icarus --samples $(or $(REGRESS_ICARUS),100000) || exit 1; done
+	for v in steady full; do for c in 1 6; do \
+	  $(BIN)/kfpga simulate --variant $$v --channels $$c --simulator verilator --samples $(REGRESS_VERILATOR) || exit 1; \
+	done; done
+	for v in steady full; do \
+	  $(BIN)/kfpga simulate --variant $$v --simulator icarus --samples $(REGRESS_ICARUS) || exit 1; \
+	done
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
