@@ -234,15 +234,23 @@ endmodule
 
 def write_codes(path, codes):
     """``codes.hex``: the (conversions, 6) signed codes, one conversion per line, in hex."""
-    codes = np.asarray(codes, dtype=np.int64) & 0xFFFF
-    lines = "\n".join(" ".join(f"{c:04x}" for c in row) for row in codes)
-    Path(path).write_text(lines + "\n")
+    # as bytes built with numpy (four hex digits and a separator per code): a million
+    # conversions in a fraction of a second, where formatting each code takes seconds
+    codes = np.asarray(codes, dtype=np.int64).reshape(-1, 6) & 0xFFFF
+    digits = np.frombuffer(b"0123456789abcdef", dtype=np.uint8)
+    out = np.empty((codes.shape[0], 6, 5), dtype=np.uint8)
+    for j, shift in enumerate((12, 8, 4, 0)):
+        out[:, :, j] = digits[(codes >> shift) & 0xF]
+    out[:, :, 4] = ord(" ")
+    out[:, -1, 4] = ord("\n")
+    Path(path).write_bytes(out.tobytes())
 
 
 def read_log(path, columns):
     """A log the wrappers write (whitespace-separated integers) as an ``(n, columns)`` int64 array."""
     text = Path(path).read_text()
-    values = np.array(text.split(), dtype=np.int64) if text.strip() else np.zeros(0, dtype=np.int64)
+    # numpy's C parser: splitting in Python costs seconds per million lines
+    values = np.fromstring(text, dtype=np.int64, sep=" ") if text.strip() else np.zeros(0, dtype=np.int64)
     if values.size % columns:
         raise ValueError(f"{path}: {values.size} numbers, not a multiple of {columns}")
     return values.reshape(-1, columns)

@@ -139,8 +139,12 @@ class SystemRecords:
         self.resets = []  # times rst_n fell
 
     def updates(self):
-        """The filter updates of the reads so far (:func:`updates_of`)."""
-        return updates_of(self.adc.reads, self.config, self.adc_channels)
+        """The filter updates of the reads so far (:func:`updates_of`), computed once per count."""
+        cached = getattr(self, "_updates", None)
+        if cached is None or cached[0] is not self.adc.reads or cached[1] != len(self.adc.reads):
+            self._updates = (self.adc.reads, len(self.adc.reads), updates_of(self.adc.reads, self.config,
+                                                                              self.adc_channels))
+        return self._updates[2]
 
     def _error_vs_float(self):
         """The hardware's output field against the float filter (and the truth) on the same samples."""
