@@ -1,8 +1,10 @@
 """Benchmark: co-simulation speed of the generated Verilog, Verilator against Icarus, one run.
 
 For each core alone, at full rate (valid and ready held high) with every estimate checked
-against the model, it reports samples/s of the clocked cocotb loop (stimulus packed before
-it, results unpacked after it) and of the whole test. For the whole design it reports
+against the model, it reports samples/s of the clocked loop (stimulus packed before it,
+results unpacked after it) and of the whole test, two ways: the cocotb bench (a Python await
+per clock cycle) and kfpga_core_cosim with the stream source and sink in the simulator
+(kfpga.sim.corerun). For the whole design it reports
 estimates per wall second, every one checked against the model and every ADS8364 timing
 figure checked on every conversion, two ways: the cocotb bench with the Python ADC model on
 the pins (one Python call per pin edge), and kfpga_cosim with the Verilog ADC model in the
@@ -17,9 +19,12 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import time
 
-from kfpga.sim import system
+from kfpga.config import FilterConfig
+from kfpga.sim import corerun, system
 from kfpga.sim.runner import SIMULATORS, build, run
+from kfpga.sim.sources import stress_codes
 from kfpga.tools import simulator_available
 
 SEED = 20080525
@@ -27,7 +32,9 @@ SEED = 20080525
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--samples", type=int, default=50000, help="samples through the steady core (default 50000)")
+    parser.add_argument("--samples", type=int, default=50000,
+                        help="samples through the steady core in the cocotb bench (default 50000; the full core a "
+                             "tenth; the in-simulator source and sink four times as many, a tenth of that on Icarus)")
     parser.add_argument("--system-samples", type=int, default=20000,
                         help="estimates through the whole design with the Verilog ADC on Verilator (default 20000; "
                              "a tenth on Icarus; the Python ADC runs a tenth on Verilator, a twentieth on Icarus)")
@@ -43,6 +50,17 @@ def main(argv=None):
             assert r["mismatches"] == 0
             rows.append({"what": f"{variant} core alone", "simulator": sim, "samples": samples,
                          "loop_samples_per_s": r["samples_per_s"], "test_samples_per_s": samples / r["wall_s"]})
+    config = FilterConfig()
+    for variant, samples in (("steady", args.samples * 4), ("full", max(args.samples * 4 // 10, 1000))):
+        for sim in sims:
+            n = samples if sim == "verilator" else samples // 10
+            words = [{"channel": 0, "y": int(c)} for c in stress_codes(SEED, n)]
+            t0 = time.perf_counter()
+            r = corerun.run(corerun.build(sim, config=config, variant=variant), words=words, seed=SEED, tag="bench")
+            assert r["mismatches"] == 0 and r["ok"]
+            rows.append({"what": f"{variant} core alone, source and sink in the simulator", "simulator": sim,
+                         "samples": n, "loop_samples_per_s": r["samples_per_s"],
+                         "test_samples_per_s": n / (time.perf_counter() - t0)})
     for variant in ("steady", "full"):
         for sim in sims:
             # the Python ADC model is the slower: fewer estimates

@@ -261,30 +261,32 @@ def write_sources(out_dir, config, *, variant, six=False, channel=None):
     _, top = write_top(out_dir, config, variant=variant, six_channel=six, channel=channel)
     hdl.write_model(out_dir)
     (out_dir / f"{hdl.COSIM_NAME}.v").write_text(hdl.cosim_wrapper(TOP_NAME, out_width(config, top.out_field)))
-    (out_dir / f"{hdl.COSIM_NAME}_clock.v").write_text(hdl.clock_top())
+    (out_dir / f"{hdl.COSIM_NAME}_clock.v").write_text(hdl.clock_top(hdl.COSIM_NAME))
     return sorted(out_dir.glob("*.v"))
 
 
-def build(simulator, *, config=None, variant=None, six=False, channel=None, root=DEFAULT_ROOT):
-    """Generate and compile ``kfpga_cosim`` for ``simulator`` (cached by content under
-    ``build/sim/<simulator>/system-<hash>``); returns a :class:`SystemBuild`."""
-    from kfpga.sim import hdl
+def compile_cached(simulator, tag, write, top, *, root=DEFAULT_ROOT):
+    """Compile the Verilog that ``write(folder)`` writes (it returns the files) with ``top`` as the
+    top level, cached by content under ``build/sim/<simulator>/<tag>-<hash>``; returns
+    ``(build folder, command line)``.
+
+    Verilator builds ``top`` with the C++ clock loop of ``cosim_main.cpp``; Icarus builds
+    ``<top>_clock``, which the files must hold, around it.
+    """
     from kfpga.tools import iverilog_path, simulator_available, verilator_env, verilator_root
 
     ok, why = simulator_available(simulator)
     if not ok:
         raise FileNotFoundError(why)
-    config = FilterConfig() if config is None else config
-    variant = variant or config.spec.default_variant
     root = Path(root).resolve()
-    staging = root / "src" / f"system-{os.getpid()}"
+    staging = root / "src" / f"{tag}-{os.getpid()}"
     shutil.rmtree(staging, ignore_errors=True)
     staging.mkdir(parents=True)
-    files = write_sources(staging, config, variant=variant, six=six, channel=channel)
+    files = write(staging)
     main = resources.files("kfpga.sim").joinpath("cosim_main.cpp").read_bytes()
     digest = hashlib.sha1(b"".join(f.read_bytes() for f in files) + main + simulator.encode()).hexdigest()[:10]
-    build_dir = root / simulator / f"system-{digest}"
-    with _locked(root / simulator / f".system-{digest}.lock"):
+    build_dir = root / simulator / f"{tag}-{digest}"
+    with _locked(root / simulator / f".{tag}-{digest}.lock"):
         src = build_dir / "src"
         stamp = build_dir / ".built"
         if not stamp.exists():
@@ -292,29 +294,40 @@ def build(simulator, *, config=None, variant=None, six=False, channel=None, root
             src.mkdir(parents=True, exist_ok=True)
             for f in staging.iterdir():
                 shutil.copy2(f, src / f.name)
-            verilog = [str(src / f.name) for f in files if f.name != f"{hdl.COSIM_NAME}_clock.v"]
+            verilog = [str(src / f.name) for f in files if f.name != f"{top}_clock.v"]
             if simulator == "verilator":
                 (src / "cosim_main.cpp").write_bytes(main)
                 cmd = [str(verilator_root() / "bin" / "verilator"), "--cc", "--exe", "--build", "-O3", "--x-assign",
                        "fast", "--x-initial", "fast", "-Wno-fatal", "-Wno-lint", "-Wno-style", "--timescale", "1ns/1ps",
-                       "--top-module", hdl.COSIM_NAME, "-Mdir", str(build_dir / "obj"), "-j", str(os.cpu_count() or 1),
-                       str(src / "cosim_main.cpp"), *verilog]
+                       "--top-module", top, "-Mdir", str(build_dir / "obj"), "-j", str(os.cpu_count() or 1),
+                       "-CFLAGS", f"-DKFPGA_TOP=V{top}", str(src / "cosim_main.cpp"), *verilog]
                 env = verilator_env()
             else:
-                cmd = [iverilog_path(), "-g2005", "-o", str(build_dir / "sim.vvp"), "-s", f"{hdl.COSIM_NAME}_clock",
-                       str(src / f"{hdl.COSIM_NAME}_clock.v"), *verilog]
+                cmd = [iverilog_path(), "-g2005", "-o", str(build_dir / "sim.vvp"), "-s", f"{top}_clock",
+                       str(src / f"{top}_clock.v"), *verilog]
                 env = None
             done = subprocess.run(cmd, capture_output=True, text=True, env=env)
             (build_dir / "build.log").write_text(done.stdout + done.stderr)
             if done.returncode:
-                raise SystemRunFailed(f"{simulator}: building kfpga_cosim failed (exit {done.returncode}):\n"
+                raise SystemRunFailed(f"{simulator}: building {top} failed (exit {done.returncode}):\n"
                                       + "\n".join((done.stdout + done.stderr).splitlines()[-30:]))
             stamp.write_text("ok")
     shutil.rmtree(staging, ignore_errors=True)
     if simulator == "verilator":
-        command = [str(build_dir / "obj" / f"V{hdl.COSIM_NAME}")]
-    else:
-        command = [str(Path(iverilog_path()).with_name("vvp")), "-n", str(build_dir / "sim.vvp")]
+        return build_dir, [str(build_dir / "obj" / f"V{top}")]
+    return build_dir, [str(Path(iverilog_path()).with_name("vvp")), "-n", str(build_dir / "sim.vvp")]
+
+
+def build(simulator, *, config=None, variant=None, six=False, channel=None, root=DEFAULT_ROOT):
+    """Generate and compile ``kfpga_cosim`` for ``simulator`` (cached by content under
+    ``build/sim/<simulator>/system-<hash>``); returns a :class:`SystemBuild`."""
+    from kfpga.sim import hdl
+
+    config = FilterConfig() if config is None else config
+    variant = variant or config.spec.default_variant
+    build_dir, command = compile_cached(
+        simulator, "system", lambda folder: write_sources(folder, config, variant=variant, six=six, channel=channel),
+        hdl.COSIM_NAME, root=root)
     return SystemBuild(simulator, build_dir, command, config, variant, bool(six), channel)
 
 

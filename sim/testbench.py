@@ -120,7 +120,7 @@ module {TB_NAME};
             if (got !== want) begin
                 mismatches = mismatches + 1;
                 if (mismatches <= 10)
-                    $display("MISMATCH estimate %0d at %0t: out_data %0d, out_channel %0d, out_overflow %0d; expected %0d, %0d, %0d",
+                    $display("MISMATCH estimate %0d at %0t: out_data %0d channel %0d overflow %0d, expected %0d %0d %0d",
                              n, $time, $signed(out_data), out_channel, out_overflow, $signed(want[{w - 1}:0]),
                              want[{w + 2}:{w}], want[{w + 3}]);
             end

@@ -8,6 +8,7 @@ Each test builds (once per content hash, under build/sim) and runs one cocotb be
 import json
 import os
 
+import numpy as np
 import pytest
 from simulators import need
 
@@ -55,6 +56,62 @@ def test_core_full_rate(simulator, variant, samples, channels, cycles, seed):
     print(f"{result['samples_per_s']:.0f} samples/s on {simulator}")
     check(result, samples)
     assert round(result["cycles_per_sample"], 2) == cycles
+
+
+def _core_words(config, n, channels, seed, order):
+    from kfpga.sim.sources import stress_codes
+
+    rng = np.random.default_rng(seed + 2)
+    chans = np.arange(n) % channels if order == "round-robin" else rng.integers(0, channels, n)
+    names = config.inputs
+    cols = {name: stress_codes(seed + 7 * j, n) for j, name in enumerate(names)}
+    return [{"channel": int(c), **{name: int(cols[name][i]) for name in names}} for i, c in enumerate(chans)]
+
+
+@pytest.mark.parametrize(("variant", "channels", "cycles", "samples"),
+                         [("steady", 4, 1, {"verilator": 200000, "icarus": 20000}),
+                          ("full", 1, 25, {"verilator": 20000, "icarus": 2000})], ids=["steady-4ch", "full"])
+def test_core_in_simulator_full_rate(simulator, variant, channels, cycles, samples, seed):
+    """The core with its stream source and sink in the simulator (kfpga.sim.corerun): the same
+    checks as the cocotb bench, at the simulator's speed."""
+    from kfpga.config import FilterConfig
+    from kfpga.sim import corerun
+
+    config = FilterConfig()
+    built = corerun.build(simulator, config=config, variant=variant, channels=channels)
+    n = samples[simulator]
+    result = corerun.run(built, words=_core_words(config, n, channels, seed, "round-robin"), seed=seed)
+    print(f"{result['samples_per_s']:.0f} samples/s on {simulator}")
+    check(result, n)
+    assert round(result["cycles_per_sample"], 2) == cycles
+    assert result["sticky_at_start"] == 0 and result["sticky_at_end"] == [result["sticky_expected"]] * 4
+
+
+@pytest.mark.parametrize("variant", ["steady", "full"])
+def test_core_in_simulator_backpressure(simulator, variant, seed):
+    """Random idle cycles and backpressure, six channel states in random order."""
+    from kfpga.config import FilterConfig
+    from kfpga.sim import corerun
+
+    config = FilterConfig()
+    built = corerun.build(simulator, config=config, variant=variant, channels=6)
+    n = 20000 if simulator == "verilator" else 2000
+    result = corerun.run(built, words=_core_words(config, n, 6, seed, "random"), seed=seed, p_idle=0.3, p_ready=0.6)
+    check(result, n)
+    assert result["cycles_per_sample"] > 1.5  # the idle cycles and the backpressure happened
+
+
+def test_core_in_simulator_sees_a_wrong_model(seed):
+    """The in-simulator core path can fail: the model told another R differs."""
+    need("verilator")
+    from kfpga.config import FilterConfig
+    from kfpga.sim import corerun
+
+    built = corerun.build("verilator", config=FilterConfig(), variant="steady", channels=1)
+    other = FilterConfig.from_dict({"model": {"R": 2.0}}, source="test")
+    result = corerun.run(built, words=_core_words(FilterConfig(), 500, 1, seed, "round-robin"), seed=seed,
+                         config=other)
+    assert result["mismatches"] > 0 and not result["ok"]
 
 
 # -- clock divider, controller -------------------------------------------------------------
