@@ -300,7 +300,15 @@ def main(argv=None):
               + (f" - {row['detail']}" if row.get("detail") and row["result"] != "killed" else ""), file=sys.stderr,
               flush=True)
 
-    rows = {b.name: run_block(b, args.mutants, args.seed, progress) for b in chosen}
+    rows = {}
+    for b in chosen:
+        t_block = time.perf_counter()
+        rows[b.name] = run_block(b, args.mutants, args.seed, progress)
+        # each block's report on its own too: blocks run one at a time keep theirs
+        folder = ROOT / re.sub(r"[^a-z0-9]+", "_", b.name.lower())
+        (folder / "report.json").write_text(json.dumps({
+            "seed": args.seed, "mutants_per_block": args.mutants, "seconds": round(time.perf_counter() - t_block),
+            "summary": summary({b.name: rows[b.name]}), "mutants": rows[b.name]}, indent=2))
     report = {"seed": args.seed, "mutants_per_block": args.mutants, "seconds": round(time.perf_counter() - t0),
               "summary": summary(rows), "mutants": rows}
     ROOT.mkdir(parents=True, exist_ok=True)
