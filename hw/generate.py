@@ -9,6 +9,7 @@ from amaranth.back import verilog
 
 from kfpga.hw.ads8364 import ADS8364Controller
 from kfpga.hw.clockdiv import ClockDivider
+from kfpga.hw.divider import Divider
 from kfpga.hw.top import AdcFrontend, FilterSystem
 
 __all__ = ["TOP_NAME", "LINT_WAIVERS", "to_verilog", "write_top", "write_block", "FORBIDDEN"]
@@ -81,8 +82,9 @@ def write_top(out_dir, config, *, variant=None, six_channel=False, channel=None,
 
 
 def write_block(out_dir, block, config=None, **params):
-    """Write one block on its own (for unit co-simulation): ``core``, ``divider``, ``controller`` or
-    ``frontend`` (divider + controller with the board's ADC pin names)."""
+    """Write one block on its own (for unit co-simulation): ``core``, ``divider`` (the clock
+    divider), ``controller``, ``frontend`` (divider + controller with the board's ADC pin names)
+    or ``restoring`` (the restoring divider of the time-varying core)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     if block == "core":
@@ -94,8 +96,10 @@ def write_block(out_dir, block, config=None, **params):
         dut = ADS8364Controller(**params)
     elif block == "frontend":
         dut = AdcFrontend(**params)
+    elif block == "restoring":
+        dut = Divider(**params)
     else:
-        raise ValueError(f"block must be core, divider, controller or frontend, not {block!r}")
+        raise ValueError(f"block must be core, divider, controller, frontend or restoring, not {block!r}")
     name = f"kfpga_{block}"
     path = out_dir / f"{name}.v"
     path.write_text(to_verilog(dut, name))

@@ -57,7 +57,9 @@ def _figures_only(elaboratable):
     return elaboratable
 
 
-def _divider_widths():
+def divider_widths():
+    """The time-varying core's divider widths (``dividend_bits``, ``divisor_bits``,
+    ``quotient_bits``) for the default configuration."""
     from kfpga.config import FilterConfig
     from kfpga.hw.kalman2 import FullKalman
 
@@ -105,7 +107,7 @@ def jobs():
     # (induction then needs only a couple of steps); the core's widths by BMC from reset over one
     # whole division, every dividend and divisor (the invariant's multiplier at those widths is
     # beyond the solver in one step)
-    widths = tuple(_divider_widths().values())
+    widths = tuple(divider_widths().values())
     for w, mode in (((6, 4, 3), "prove"), ((8, 5, 5), "prove"), (widths, "bmc")):
         label = f"divider {w[0]}/{w[1]}->{w[2]}"
         depth = 3 if mode == "prove" else w[2] + 4

@@ -193,17 +193,15 @@ def build(simulator, *, config=None, variant=None, channels=1, root=DEFAULT_ROOT
     lin, lout = input_layout(config, channels), output_layout(config, channels)
     in_fields, out_fields = _fields(lin), _fields(lout)
     widths = (sum(f[2] for f in in_fields), sum(f[2] for f in out_fields))
-    core = {}
 
     def write(folder):
-        path, dut = write_block(folder, "core", config, variant=variant, channels=channels)
-        core["cycles"] = dut.cycles_per_update
+        write_block(folder, "core", config, variant=variant, channels=channels)
         (folder / f"{CORE_COSIM}.v").write_text(core_wrapper(in_fields, out_fields, *widths))
         (folder / f"{CORE_COSIM}_clock.v").write_text(hdl.clock_top(CORE_COSIM))
         return sorted(folder.glob("*.v"))
 
     build_dir, command = compile_cached(simulator, f"core-{variant}-{channels}", write, CORE_COSIM, root=root)
-    cycles = core.get("cycles") or config.spec.make_core(config, variant, channels=channels).cycles_per_update
+    cycles = config.spec.make_core(config, variant, channels=channels).cycles_per_update
     return CoreBuild(simulator, build_dir, command, config, variant, channels, in_fields, out_fields, cycles)
 
 
@@ -238,7 +236,7 @@ def run(built, *, words, seed, p_idle=0.0, p_ready=1.0, config=None, tag=None, t
     if done.returncode or not summary.exists() or not summary.read_text().strip():
         raise SystemRunFailed(f"{built.simulator}: the core run ended without a summary (exit {done.returncode}):\n"
                               + (done.stdout + done.stderr)[-2000:])
-    n_in, n_out, cycles, first, last, sticky_start, sticky_end, extra, status = (
+    n_in, n_out, _cycles, first, last, sticky_start, sticky_end, extra, status = (
         int(v) for v in summary.read_text().split())
     if status:
         why = {2: "the inputs ran out", 3: f"the cycle limit ({max_cycles} cycles, {n_out} of {n} estimates out)"}

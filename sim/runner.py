@@ -63,8 +63,11 @@ def _design_verilog(out_dir, design, config, opts):
         path, _ = write_block(out_dir, "divider", ratio=opts.get("ratio", 10))
     elif design == "frontend":
         path, _ = write_block(out_dir, "frontend", six_channel=opts.get("six", False), channel=opts.get("channel", 0))
+    elif design == "restoring":
+        path, _ = write_block(out_dir, "restoring", dividend_bits=opts["dividend_bits"],
+                              divisor_bits=opts["divisor_bits"], quotient_bits=opts["quotient_bits"])
     else:
-        raise ValueError(f"design must be top, system, core, divider or frontend, not {design!r}")
+        raise ValueError(f"design must be top, system, core, divider, frontend or restoring, not {design!r}")
     return path, path.stem
 
 

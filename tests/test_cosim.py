@@ -123,6 +123,19 @@ def test_clock_divider(simulator, ratio, seed):
     assert result["strobe_periods"] == [ratio]
 
 
+def test_restoring_divider_alone(simulator, seed):
+    """The time-varying core's divider at its widths: every quotient and flag against integer
+    division, operands on the overflow boundary, divisor 0 and 1, backpressure."""
+    from kfpga.formal import divider_widths
+
+    widths = divider_widths()
+    n = 3000 if simulator == "verilator" else 1500
+    result = run(build(simulator, "restoring", **widths), "test_restoring",
+                 params={**widths, "seed": seed, "samples": n})
+    assert result["mismatches"] == 0 and result["samples"] == n
+    assert 0 < result["overflows"] < n
+
+
 @pytest.mark.parametrize("six", [False, True], ids=["1ch", "6ch"])
 def test_controller_pin_protocol(simulator, six, seed):
     result = run(build(simulator, "frontend", six=six, channel=3), "test_ads8364",
