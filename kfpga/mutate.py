@@ -127,14 +127,20 @@ def _run_bench(block, verilog_text, seed, timeout=300):
     return result == "passed", result
 
 
+#: Seconds an equivalence proof may take before the mutant counts as not proven equivalent.
+EQUIVALENCE_TIMEOUT_S = 900
+
+
 def _sby(folder, il_name, mode, depth, top="top"):
-    """Prove the assertions of ``il_name`` (``mode`` prove or bmc, to ``depth``); the status word."""
+    """Prove the assertions of ``il_name`` (``mode`` prove or bmc, to ``depth``); the status word
+    (ERROR after :data:`EQUIVALENCE_TIMEOUT_S`)."""
     from kfpga.formal import PREP, sby, status
 
     (folder / "check.sby").write_text(f"[options]\nmode {mode}\ndepth {depth}\nmulticlock off\n\n"
                                       f"[engines]\nsmtbmc yices\n\n[script]\nread_rtlil {il_name}\n"
                                       f"{PREP.format(top=top)}\n[files]\n{il_name}\n")
-    sby(folder, "check.sby")
+    shutil.rmtree(folder / "check", ignore_errors=True)
+    sby(folder, "check.sby", timeout=EQUIVALENCE_TIMEOUT_S)
     return status(folder / "check")
 
 
@@ -209,17 +215,17 @@ def _equivalence(block, line, mdir, folder):
                      "hierarchy -top miter\nwrite_rtlil miter.il\n", mdir)
     if not ok:
         return {"result": "survived", "by": None, "detail": "no miter: " + log.strip()[-200:]}
+    # first the fast check: the two designs' registers matched by name (Yosys's equiv_induct)
+    # proves the mutants that change no reachable state, and those whose change goes nowhere
+    ok, _ = _yosys("read_rtlil gold.il\nread_rtlil gate.il\nequiv_make gold gate equiv\nhierarchy -top equiv\n"
+                   "async2sync\nequiv_simple -seq 5\nequiv_induct -seq 5\nequiv_status -assert\n", mdir)
+    if ok:
+        return {"result": "equivalent", "by": "Yosys equiv_induct (registers matched)"}
     status = _sby(mdir, "miter.il", "prove", 20, top="miter")
     if status == "PASS":
         return {"result": "equivalent", "by": "SymbiYosys: k-induction on a miter"}
     if status == "FAIL":
         return {"result": "survived", "by": None, "detail": "a difference exists (counterexample)"}
-    # the miter's induction can fail on states neither design reaches; matching the two designs'
-    # registers by name (Yosys's equiv_induct) proves the mutants that change no reachable state
-    ok, _ = _yosys("read_rtlil gold.il\nread_rtlil gate.il\nequiv_make gold gate equiv\nhierarchy -top equiv\n"
-                   "async2sync\nequiv_simple -seq 5\nequiv_induct -seq 5\nequiv_status -assert\n", mdir)
-    if ok:
-        return {"result": "equivalent", "by": "Yosys equiv_induct (registers matched)"}
     # a small miter: every reachable state is reachable on a path that repeats no state, so a
     # bounded check from power-up as deep as there are states is a complete proof
     bits = _state_bits(mdir, "miter.il", "miter")
