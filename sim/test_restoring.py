@@ -1,9 +1,9 @@
 """cocotb: the restoring divider alone (``hw/divider.py``), every quotient and flag against integer
 division, with random idle cycles and backpressure.
 
-The requests mix uniform operands with the cases a divider gets wrong: divisor 0 and 1, the
-largest operands, and dividends on both sides of ``divisor << quotient_bits`` (the first that
-overflows and the last that does not).
+The requests mix divisors of every size with the cases a divider gets wrong: divisor 0 and 1,
+the largest operands, and dividends on both sides of ``divisor << quotient_bits`` (the first
+that overflows and the last that does not).
 """
 
 import random
@@ -28,14 +28,17 @@ def expected(dividend, divisor, qbits):
 
 
 def requests(rng, n, nb, db, qb):
+    """``n`` requests: divisors of every size (log-uniform: a divisor of a few bits puts every
+    remainder near it, where a wrong comparison shows), and the special operands."""
     out = []
     for _ in range(n):
         kind = rng.randrange(8)
-        divisor = rng.randrange(1 << db)
+        size = rng.randrange(1, db + 1)
+        divisor = rng.randrange(1 << (size - 1), 1 << size)
         if kind == 0:
             divisor = rng.choice([0, 1, (1 << db) - 1])
             dividend = rng.randrange(1 << nb)
-        elif kind in (1, 2) and divisor:
+        elif kind in (1, 2):
             # on the overflow boundary: divisor << qb is the first dividend whose quotient does not fit
             edge = divisor << qb
             dividend = min(max(edge - rng.choice([1, 0]) - rng.randrange(3) * (kind == 2), 0), (1 << nb) - 1)
@@ -43,10 +46,8 @@ def requests(rng, n, nb, db, qb):
             dividend = rng.choice([0, (1 << nb) - 1, rng.randrange(1 << nb)])
             divisor = rng.choice([1, 2, 3, divisor | 1])
         else:
-            dividend = rng.randrange(1 << nb)
-            # small dividends against large divisors too: quotients of every size
-            if kind == 4:
-                dividend >>= rng.randrange(nb)
+            # a quotient that fits, of any size
+            dividend = rng.randrange(min(divisor << qb, 1 << nb)) >> rng.randrange(qb)
         out.append({"dividend": dividend, "divisor": divisor})
     return out
 
