@@ -12,7 +12,7 @@ from kfpga.hw.clockdiv import ClockDivider
 from kfpga.hw.divider import Divider
 from kfpga.hw.top import AdcFrontend, FilterSystem
 
-__all__ = ["TOP_NAME", "LINT_WAIVERS", "to_verilog", "write_top", "write_block", "FORBIDDEN"]
+__all__ = ["TOP_NAME", "LINT_WAIVERS", "figures_only", "to_verilog", "write_top", "write_block", "FORBIDDEN"]
 
 TOP_NAME = "kfpga_top"
 
@@ -40,6 +40,15 @@ FORBIDDEN = ("$display", "$finish", "$stop", "$random", "initial begin", "always
 
 
 _ESCAPED_MODULE = re.compile(r"^module \\(\S+) ", re.MULTILINE)
+
+
+def figures_only(elaboratable):
+    """``elaboratable``, read for its figures only (latency, widths): not built, so Amaranth need
+    not warn that it was never used (its ``MustUse`` flag)."""
+    for obj in (elaboratable, getattr(elaboratable, "dut", None)):  # a harness and its block
+        if obj is not None:
+            obj._MustUse__silence = True
+    return elaboratable
 
 
 def to_verilog(elaboratable, name):

@@ -29,6 +29,7 @@ from pathlib import Path
 from amaranth.back import rtlil
 
 from kfpga import registry
+from kfpga.hw.generate import figures_only
 
 __all__ = ["Job", "jobs", "run_job", "main"]
 
@@ -49,22 +50,13 @@ class Job:
         return re.sub(r"[^a-z0-9]+", "_", f"{self.block} {self.prop}".lower()).strip("_")
 
 
-def _figures_only(elaboratable):
-    """``elaboratable``, read for its figures only: not built, so Amaranth need not warn that it
-    was never used (its ``MustUse`` flag)."""
-    for obj in (elaboratable, getattr(elaboratable, "dut", None)):  # a harness and its block
-        if obj is not None:
-            obj._MustUse__silence = True
-    return elaboratable
-
-
 def divider_widths():
     """The time-varying core's divider widths (``dividend_bits``, ``divisor_bits``,
     ``quotient_bits``) for the default configuration."""
     from kfpga.config import FilterConfig
     from kfpga.hw.kalman2 import FullKalman
 
-    return _figures_only(FullKalman(FilterConfig()))._divider_args
+    return figures_only(FullKalman(FilterConfig()))._divider_args
 
 
 def _cores():
@@ -78,7 +70,7 @@ def _cores():
         for variant in spec.variants:
             if spec.variants[variant].hardware(config.params):
                 continue
-            core = _figures_only(spec.make_core(config, variant))  # each job makes its own
+            core = figures_only(spec.make_core(config, variant))  # each job makes its own
             # what a core holds at most: a steady core its input register, one sample in the loop
             # (one channel: the next waits for the write-back), one per output step's register
             # and the output register; a time-varying core the update under way and its result
@@ -125,7 +117,7 @@ def jobs():
             if prop == "RD under CS":  # the word register only takes table entries: induction closes at once
                 out.append(Job(label, prop, make, "prove", 4, conversion))
             elif prop == "recovery":
-                bound = _figures_only(make(only=None)).bound
+                bound = figures_only(make(only=None)).bound
                 out.append(Job(label, prop, make, "bmc", 2 * bound + 6, 2 * bound + 6))
             elif prop == "timeout":
                 out.append(Job(label, prop, make, "bmc", 2 * 40 + 12, 2 * 40 + 12))

@@ -185,7 +185,7 @@ class CoreBuild:
 
 def build(simulator, *, config=None, variant=None, channels=1, root=DEFAULT_ROOT):
     """Generate and compile ``kfpga_core_cosim`` for one core (cached by content)."""
-    from kfpga.hw.generate import write_block
+    from kfpga.hw.generate import figures_only, write_block
     from kfpga.sim import hdl
 
     config = FilterConfig() if config is None else config
@@ -201,7 +201,7 @@ def build(simulator, *, config=None, variant=None, channels=1, root=DEFAULT_ROOT
         return sorted(folder.glob("*.v"))
 
     build_dir, command = compile_cached(simulator, f"core-{variant}-{channels}", write, CORE_COSIM, root=root)
-    cycles = config.spec.make_core(config, variant, channels=channels).cycles_per_update
+    cycles = figures_only(config.spec.make_core(config, variant, channels=channels)).cycles_per_update
     return CoreBuild(simulator, build_dir, command, config, variant, channels, in_fields, out_fields, cycles)
 
 
