@@ -23,7 +23,7 @@ from kfpga.config import FilterConfig
 from kfpga.hw.generate import TOP_NAME, write_block, write_top
 from kfpga.tools import simulator_available, verilator_env, verilator_fst
 
-__all__ = ["SIMULATORS", "Built", "build", "run", "SimulationFailed"]
+__all__ = ["SIMULATORS", "Built", "build", "run", "SimulationFailed", "file_lock"]
 
 SIMULATORS = ("verilator", "icarus")
 DEFAULT_ROOT = Path("build") / "sim"
@@ -45,18 +45,10 @@ class Built:
 
 def _design_verilog(out_dir, design, config, opts):
     """Write the Verilog of ``design`` into ``out_dir``; returns ``(path, toplevel)``."""
-    if design in ("top", "system"):
-        path, top = write_top(out_dir, config, variant=opts["variant"], six_channel=opts.get("six", False),
-                              channel=opts.get("channel"))
-        if design == "top":
-            return path, TOP_NAME
-        # the design and the ADS8364 model in the simulator (sim/hdl.py)
-        from kfpga.hw.top import out_width
-        from kfpga.sim import hdl
-
-        hdl.write_model(out_dir)
-        (out_dir / f"{hdl.COSIM_NAME}.v").write_text(hdl.cosim_wrapper(TOP_NAME, out_width(config, top.out_field)))
-        return path, hdl.COSIM_NAME
+    if design == "top":
+        path, _ = write_top(out_dir, config, variant=opts["variant"], six_channel=opts.get("six", False),
+                            channel=opts.get("channel"))
+        return path, TOP_NAME
     if design == "core":
         path, _ = write_block(out_dir, "core", config, variant=opts["variant"], channels=opts.get("channels", 1))
     elif design == "divider":
@@ -67,12 +59,13 @@ def _design_verilog(out_dir, design, config, opts):
         path, _ = write_block(out_dir, "restoring", dividend_bits=opts["dividend_bits"],
                               divisor_bits=opts["divisor_bits"], quotient_bits=opts["quotient_bits"])
     else:
-        raise ValueError(f"design must be top, system, core, divider, frontend or restoring, not {design!r}")
+        raise ValueError(f"design must be top, core, divider, frontend or restoring, not {design!r}")
     return path, path.stem
 
 
 @contextlib.contextmanager
-def _locked(path):
+def file_lock(path):
+    """An exclusive lock on ``path`` for the block: parallel test workers build a design once."""
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "w") as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
@@ -103,7 +96,7 @@ def build(simulator, design, *, config=None, root=DEFAULT_ROOT, waves=False, qui
     build_dir = root / simulator / f"{design}-{digest}"
     if simulator == "verilator":
         os.environ.update(verilator_env())
-    with _locked(root / simulator / f".{design}-{digest}.lock"):
+    with file_lock(root / simulator / f".{design}-{digest}.lock"):
         src = build_dir / "src"
         src.mkdir(parents=True, exist_ok=True)
         for f in staging.iterdir():
@@ -116,9 +109,6 @@ def build(simulator, design, *, config=None, root=DEFAULT_ROOT, waves=False, qui
         if simulator == "verilator":
             sources.append(VerilatorControlFile(src / "verilator_lint.vlt"))
             build_args = ["-O3", "--x-assign", "fast", "--x-initial", "fast", "-Wno-fatal"]
-            if design == "system":
-                # the wrapper's clock is a delay loop: Verilator's timing needs C++20 coroutines
-                build_args += ["--timing", "-CFLAGS", "-std=c++20 -fcoroutines"]
             if waves and verilator_fst():  # FST, as Icarus writes: compressed, a tenth of the VCD's size
                 build_args.append("--trace-fst")
         stamp = build_dir / ".built"

@@ -18,8 +18,6 @@ it. No Python runs per clock edge: this is what makes them fast.
 from __future__ import annotations
 
 import collections
-import contextlib
-import fcntl
 import hashlib
 import os
 import random
@@ -240,17 +238,6 @@ class SystemBuild:
     channel: int | None
 
 
-@contextlib.contextmanager
-def _locked(path):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w") as handle:
-        fcntl.flock(handle, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(handle, fcntl.LOCK_UN)
-
-
 def write_sources(out_dir, config, *, variant, six=False, channel=None):
     """The generated top, the ADC model and ``kfpga_cosim`` (and its clock top) in ``out_dir``."""
     from kfpga.hw.generate import TOP_NAME, write_top
@@ -273,6 +260,7 @@ def compile_cached(simulator, tag, write, top, *, root=DEFAULT_ROOT):
     Verilator builds ``top`` with the C++ clock loop of ``cosim_main.cpp``; Icarus builds
     ``<top>_clock``, which the files must hold, around it.
     """
+    from kfpga.sim.runner import file_lock
     from kfpga.tools import iverilog_path, simulator_available, verilator_env, verilator_root
 
     ok, why = simulator_available(simulator)
@@ -286,7 +274,7 @@ def compile_cached(simulator, tag, write, top, *, root=DEFAULT_ROOT):
     main = resources.files("kfpga.sim").joinpath("cosim_main.cpp").read_bytes()
     digest = hashlib.sha1(b"".join(f.read_bytes() for f in files) + main + simulator.encode()).hexdigest()[:10]
     build_dir = root / simulator / f"{tag}-{digest}"
-    with _locked(root / simulator / f".{tag}-{digest}.lock"):
+    with file_lock(root / simulator / f".{tag}-{digest}.lock"):
         src = build_dir / "src"
         stamp = build_dir / ".built"
         if not stamp.exists():

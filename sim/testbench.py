@@ -22,7 +22,6 @@ them, the same grouping into filter updates as the co-simulation's scoreboard
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -235,6 +234,5 @@ def run_icarus(out_dir, timeout_s=None):
     done = subprocess.run(compile_cmd, cwd=out_dir, capture_output=True, text=True, timeout=300)
     if done.returncode:
         return done.returncode, done.stdout + done.stderr
-    done = subprocess.run(run_cmd, cwd=out_dir, capture_output=True, text=True, timeout=timeout_s,
-                          env={**os.environ})
+    done = subprocess.run(run_cmd, cwd=out_dir, capture_output=True, text=True, timeout=timeout_s)
     return done.returncode, done.stdout + done.stderr
