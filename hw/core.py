@@ -14,14 +14,14 @@ from functools import reduce
 from types import MappingProxyType
 from typing import ClassVar
 
-from amaranth import Cat, Const, Module, Signal, signed
+from amaranth import Cat, Const, Module, Mux, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from kfpga.ads8364 import CODE_FORMAT
 from kfpga.hw.arith import AmaranthOps
-from kfpga.hw.layouts import input_layout, output_layout
-from kfpga.hw.storage import at, check_channels, select, state_array
+from kfpga.hw.layouts import channel_bits, input_layout, output_layout
+from kfpga.hw.storage import MAX_REGISTER_CHANNELS, StateMemory, at, check_channels, select, state_array
 from kfpga.ops import Fx
 
 __all__ = ["Core", "LoopPipeline", "write_estimate"]
@@ -41,8 +41,13 @@ def write_estimate(m, core, channel, outputs, flags):
 class Core(wiring.Component):
     """Config, variant, channel count, constants, reset state and the stream signature."""
 
-    def __init__(self, config, variant, channels):
-        check_channels(channels)
+    #: Channel states this core can hold (a core that keeps them in block memory holds more).
+    max_channels = MAX_REGISTER_CHANNELS
+
+    def __init__(self, config, variant, channels, *, index_bits=None):
+        check_channels(channels, self.max_channels)
+        if index_bits is not None and index_bits < channel_bits(channels):
+            raise ValueError(f"index_bits = {index_bits} cannot number {channels} channels")
         config.require_hardware(variant)
         self.config = config
         self.variant = variant
@@ -51,8 +56,8 @@ class Core(wiring.Component):
         self.reset_state = config.reset_state(variant)
         self.state_points = dict(config.spec.variants[variant].state_for(config.params))
         super().__init__({
-            "i": In(stream.Signature(input_layout(config, channels))),
-            "o": Out(stream.Signature(output_layout(config, channels))),
+            "i": In(stream.Signature(input_layout(config, channels, index_bits))),
+            "o": Out(stream.Signature(output_layout(config, channels, index_bits))),
             "overflow": Out(1),
         })
 
@@ -94,6 +99,16 @@ class LoopPipeline(Core):
     With one channel a state value that a later stage reads is read again from the state
     register (it cannot change before this sample writes back) instead of being carried in
     pipeline registers; with several channels the read mux would cost more than it saves.
+
+    Up to :data:`~kfpga.hw.storage.MAX_REGISTER_CHANNELS` channel states live in registers.
+    A subclass that sets :attr:`max_channels` higher keeps more of them in block memory
+    (:class:`~kfpga.hw.storage.StateMemory`, the Cyclone II M4K blocks): one word per channel,
+    read synchronously. Its read address is the next sample's channel while the input register
+    takes it, else the waiting sample's, so the word is in the read register when the sample is
+    in the input register. The read is not transparent (an M4K read during a write to the same
+    address gives the old word), so a sample also waits for the write-back of the clock before:
+    the hazard is stalled, never forwarded, and one channel takes a sample every L + 1 cycles
+    (any order of channels works; C > L channels in turn still run one per clock).
     """
 
     steps: ClassVar[tuple] = ()
@@ -102,10 +117,10 @@ class LoopPipeline(Core):
     cuts: ClassVar[dict] = MappingProxyType({})
     writes: ClassVar[dict] = MappingProxyType({})
 
-    def __init__(self, config, variant, *, channels=1, stages):
+    def __init__(self, config, variant, *, channels=1, stages, index_bits=None):
         if not isinstance(stages, int) or isinstance(stages, bool) or stages not in self.cuts:
             raise ValueError(f"stages must be one of {', '.join(map(str, self.cuts))}, not {stages!r}")
-        super().__init__(config, variant, channels)
+        super().__init__(config, variant, channels, index_bits=index_bits)
         self.stages = stages
 
     # what a subclass provides after the loop
@@ -133,16 +148,17 @@ class LoopPipeline(Core):
     @property
     def cycles_per_update(self):
         """Cycles from accepting one sample to accepting the next of the same channel (``o`` ready)."""
-        return self.stages
+        return self.stages + (1 if self.channels > MAX_REGISTER_CHANNELS else 0)
 
     def samples_per_clock(self, channels):
-        """Samples per clock with ``channels`` channels in turn: ``min(1, channels / L)``."""
-        return min(1.0, channels / self.stages)
+        """Samples per clock with ``channels`` channels in turn: ``min(1, channels / cycles_per_update)``."""
+        return min(1.0, channels / self.cycles_per_update)
 
     def elaborate(self, platform):
         m = Module()
         f = self.config.formats
-        regs = self._states()
+        in_memory = self.channels > MAX_REGISTER_CHANNELS
+        regs = {} if in_memory else self._states()
         advance = Signal()
         m.d.comb += advance.eq(~self.o.valid | self.o.ready)
 
@@ -156,7 +172,13 @@ class LoopPipeline(Core):
             m.d.sync += [s0_valid.eq(self.i.valid), s0.eq(self.i.payload)]
 
         live = {name: Fx(getattr(s0, name).as_signed(), 0, None, CODE_FORMAT, name) for name in self.config.inputs}
-        live.update({name: self._state_value(regs, name, s0.channel) for name in regs})
+        if in_memory:
+            memory = StateMemory(self.channels, {n: f[p] for n, p in self.state_points.items()}, self.reset_state)
+            m.submodules.state = memory
+            m.d.comb += memory.read_addr.eq(Mux(take, self.i.payload.channel, s0.channel))
+            live.update(memory.values(m, s0.channel))
+        else:
+            live.update({name: self._state_value(regs, name, s0.channel) for name in regs})
         valid, channel, flags = s0_valid & ~hazard, s0.channel, Const(0, 1)
         in_flight = []  # (valid, channel) of the samples before their write-back
         groups, start = [], 0
@@ -182,8 +204,17 @@ class LoopPipeline(Core):
             valid, channel, flags, live = self._register(m, advance, n, valid, channel, flags, live)
             in_flight.append((valid, channel))
         # write-back at the end of the last loop stage
-        with m.If(advance & valid):
-            m.d.sync += [at(regs[name], channel).eq(live[key].raw) for name, key in self.writes.items()]
+        if in_memory:
+            memory.write(m, advance & valid, channel, {name: live[key].raw for name, key in self.writes.items()})
+            # the word written at the last clock edge is not yet in what the memory reads
+            wrote_valid, wrote_channel = Signal(name="wrote_valid"), Signal.like(channel, name="wrote_channel")
+            m.d.sync += [wrote_valid.eq(advance & valid), wrote_channel.eq(channel)]
+            in_flight.append((wrote_valid, wrote_channel))
+        else:
+            # a channel number past the last state updates nothing (one state: the register itself)
+            in_range = channel < self.channels if 1 < self.channels < 2 ** len(channel) else Const(1, 1)
+            with m.If(advance & valid & in_range):
+                m.d.sync += [at(regs[name], channel).eq(live[key].raw) for name, key in self.writes.items()]
         m.d.comb += hazard.eq(reduce(lambda a, b: a | b, [v & (c == s0.channel) for v, c in in_flight], Const(0, 1)))
 
         # after the loop: the output steps, a register stage between two

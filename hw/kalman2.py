@@ -27,25 +27,26 @@ from kfpga.hw.storage import at, select
 from kfpga.model import kalman2 as eq
 from kfpga.ops import Fx, divider_shift, quotient_bits
 
-__all__ = ["SteadyKalman", "FullKalman", "make_core"]
+__all__ = ["SteadyKalman", "FullKalman", "make_core", "STEADY_STEPS", "CUTS", "steady_predict", "steady_innovation",
+           "steady_products", "steady_correct"]
 
 
-def _steady_predict(ops, k, v):
+def steady_predict(ops, k, v):
     v["xl1"] = eq.predict(ops, v["x1"], v["v"])                         # xl1 = x1 + v
     return v
 
 
-def _steady_innovation(ops, k, v):
+def steady_innovation(ops, k, v):
     v["e"] = eq.innovation(ops, v["y"], v["xl1"])                       # e = y - xl1
     return v
 
 
-def _steady_products(ops, k, v):
+def steady_products(ops, k, v):
     v["k1e"], v["k2e"] = ops.mul(k["k1"], v["e"]), ops.mul(k["k2"], v["e"])  # K1 e, T K2 e
     return v
 
 
-def _steady_correct(ops, k, v):
+def steady_correct(ops, k, v):
     v["x1_next"] = eq.correct(ops, v["xl1"], v["k1e"], "x1")             # x1 = xl1 + K1 e
     v["v_next"] = eq.correct(ops, v["v"], v["k2e"], "v")                 # v = v + T K2 e
     return v
@@ -53,7 +54,7 @@ def _steady_correct(ops, k, v):
 
 #: The steady-state update as four steps of about one carry chain (or one multiplier) each;
 #: ``CUTS[L]`` lists the steps a pipeline of L stages registers after (SteadyKalman).
-STEADY_STEPS = (_steady_predict, _steady_innovation, _steady_products, _steady_correct)
+STEADY_STEPS = (steady_predict, steady_innovation, steady_products, steady_correct)
 #: What each step reads: a value no later step reads is not registered.
 STEADY_READS = ({"x1", "v"}, {"y", "xl1"}, {"e"}, {"xl1", "v", "k1e", "k2e"})
 CUTS = {1: (), 2: (2,), 3: (1, 3), 4: (1, 2, 3)}

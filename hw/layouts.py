@@ -19,17 +19,18 @@ def channel_bits(channels):
     return max(1, (channels - 1).bit_length())
 
 
-def input_layout(config, channels):
-    """``channel`` and one signed 16-bit field per input of the filter (``y`` for one input)."""
-    fields = {"channel": unsigned(channel_bits(channels))}
+def input_layout(config, channels, bits=None):
+    """``channel`` (``bits`` wide, default :func:`channel_bits`) and one signed 16-bit field per
+    input of the filter (``y`` for one input)."""
+    fields = {"channel": unsigned(channel_bits(channels) if bits is None else bits)}
     fields.update({name: signed(CODE_FORMAT.width) for name in config.inputs})
     return data.StructLayout(fields)
 
 
-def output_layout(config, channels):
+def output_layout(config, channels, bits=None):
     """``channel``, every output field in its point's format, and the sample's ``overflow`` flag."""
     f = config.formats
-    fields = {"channel": unsigned(channel_bits(channels))}
+    fields = {"channel": unsigned(channel_bits(channels) if bits is None else bits)}
     fields.update({o.name: signed(f[o.point].width) for o in config.outputs})
     fields["overflow"] = 1
     return data.StructLayout(fields)

@@ -52,6 +52,38 @@ module kfpga_mul (A, B, Y);
   input [B_WIDTH-1:0] B;
   output [Y_WIDTH-1:0] Y;
 endmodule
+
+(* blackbox *)
+module kfpga_mem (RD_CLK, RD_EN, RD_ARST, RD_SRST, RD_ADDR, RD_DATA, WR_CLK, WR_EN, WR_ADDR, WR_DATA);
+  parameter MEMID = "";
+  parameter SIZE = 1;
+  parameter OFFSET = 0;
+  parameter ABITS = 1;
+  parameter WIDTH = 1;
+  parameter INIT = 0;
+  parameter RD_PORTS = 1;
+  parameter RD_CLK_ENABLE = 0;
+  parameter RD_CLK_POLARITY = 0;
+  parameter RD_TRANSPARENCY_MASK = 0;
+  parameter RD_COLLISION_X_MASK = 0;
+  parameter RD_WIDE_CONTINUATION = 0;
+  parameter RD_CE_OVER_SRST = 0;
+  parameter RD_ARST_VALUE = 0;
+  parameter RD_SRST_VALUE = 0;
+  parameter RD_INIT_VALUE = 0;
+  parameter WR_PORTS = 1;
+  parameter WR_CLK_ENABLE = 0;
+  parameter WR_CLK_POLARITY = 0;
+  parameter WR_PRIORITY_MASK = 0;
+  parameter WR_WIDE_CONTINUATION = 0;
+  input [RD_PORTS-1:0] RD_CLK, RD_EN, RD_ARST, RD_SRST;
+  input [RD_PORTS*ABITS-1:0] RD_ADDR;
+  output [RD_PORTS*WIDTH-1:0] RD_DATA;
+  input [WR_PORTS-1:0] WR_CLK;
+  input [WR_PORTS*WIDTH-1:0] WR_EN;
+  input [WR_PORTS*ABITS-1:0] WR_ADDR;
+  input [WR_PORTS*WIDTH-1:0] WR_DATA;
+endmodule
 """
 
 _FRONT = """
@@ -69,6 +101,9 @@ opt_clean
 techmap -map +/mul2dsp.v -D DSP_A_MAXWIDTH=18 -D DSP_B_MAXWIDTH=18 -D DSP_A_MINWIDTH=2 -D DSP_B_MINWIDTH=2 -D DSP_NAME=$__kfpga_mul
 chtype -set kfpga_mul t:$__kfpga_mul
 chtype -set $mul t:$__soft_mul
+memory -nomap
+tee -q -o memory.log stat -width
+chtype -set kfpga_mem t:$mem_v2
 """
 
 _SYNTH = _FRONT + """
@@ -287,7 +322,7 @@ def estimate(verilog, top, *, work_dir=None, timing=None):
         _yosys(_SYNTH.format(out="synth.json", **names), tmp)
         _yosys(_CARRY.format(out="carry.json", **names), tmp)
         # read from the file: after Yosys's abc pass its stdout can go silent
-        log = (tmp / "stat.log").read_text()
+        log = (tmp / "memory.log").read_text()  # before the memories become black boxes (block RAM)
         synth = _module(tmp / "synth.json", top)
         carry = _module(tmp / "carry.json", top)
     luts = sum(1 for c in synth["cells"].values() if c["type"].endswith("lcell_comb"))

@@ -131,6 +131,15 @@ def _is_ff(cell_type):
     return "dff" in cell_type.lower()
 
 
+#: A block RAM left whole by ``hw/resources.py`` (an M4K block): its read data is registered
+#: inside it and its inputs are sampled at the clock, so paths start and end at it.
+MEMORY_CELL = "kfpga_mem"
+
+
+def _is_sequential(cell_type):
+    return _is_ff(cell_type) or cell_type == MEMORY_CELL
+
+
 def _bits(cell, port):
     return cell["connections"].get(port, [])
 
@@ -153,7 +162,7 @@ class _Arrivals:
         self.input_delays = input_delays
         self.driver, self.ff_q = {}, {}
         for name, cell in self.cells.items():
-            table = self.ff_q if _is_ff(cell["type"]) else self.driver
+            table = self.ff_q if _is_sequential(cell["type"]) else self.driver
             for port in _ports(cell, "output"):
                 for bit in _bits(cell, port):
                     if isinstance(bit, int):
@@ -182,7 +191,9 @@ class _Arrivals:
             if b in self.arrival:
                 stack.pop()
             elif b in self.ff_q:
-                self.arrival[b] = (self.d("t_co"), None, self.ff_q[b])
+                memory = self.cells[self.ff_q[b]]["type"] == MEMORY_CELL
+                self.arrival[b] = (self.d("t_m4k") + self.d("t_route_m4k") if memory else self.d("t_co"), None,
+                                   self.ff_q[b])
             elif b not in self.driver:  # a port, or undriven
                 port = self.port_of.get(b)
                 timed = port in self.input_delays
@@ -265,6 +276,8 @@ class _Arrivals:
         kind = self.cells[cell]["type"]
         if _is_ff(kind):
             return "register"
+        if kind == MEMORY_CELL:
+            return "M4K read"
         return {"$lut": "LUT", "$alu": "carry chain", "kfpga_mul": "multiplier", "$macc": "adder"}.get(kind, kind)
 
 
@@ -295,22 +308,24 @@ def analyse(module, *, period_ns=20.0, derate=DERATE_C8, input_delays=None, outp
     arr = _Arrivals(module, derate, input_delays)
     worst, io = None, {}
     for cell in module["cells"].values():
-        if not _is_ff(cell["type"]):
+        if not _is_sequential(cell["type"]):
             continue
         q = next((b for p in _ports(cell, "output") for b in _bits(cell, p) if isinstance(b, int)), None)
+        # into an M4K block: the route to it, then its input register's setup
+        setup = arr.d("t_su") + (arr.d("t_route_m4k") if cell["type"] == MEMORY_CELL else 0.0)
         for port in _ports(cell, "input"):
             for bit in _bits(cell, port):
                 if arr.at(bit) is None:
                     continue
-                total = arr.arrival[bit][0] + arr.d("t_su")
+                total = arr.arrival[bit][0] + setup
                 origin = _origin(arr, bit)
                 end = arr.name(q) if q is not None else "register"
                 if origin.startswith("port "):
                     pname = origin[5:]
                     if pname not in io or total > io[pname].delay_ns:
-                        io[pname] = arr.path(bit, end, arr.d("t_su"), "input", period_ns * multicycle.get(pname, 1))
+                        io[pname] = arr.path(bit, end, setup, "input", period_ns * multicycle.get(pname, 1))
                 elif worst is None or total > worst.delay_ns:
-                    worst = arr.path(bit, end, arr.d("t_su"), "reg2reg")
+                    worst = arr.path(bit, end, setup, "reg2reg")
     for pname, port in module["ports"].items():
         if port["direction"] != "output" or pname not in output_delays:
             continue

@@ -427,6 +427,8 @@ def _run_filter(args):
 
     check_output_file(args.output, option="--output", inputs=(args.input, args.config), extensions=(".csv", ".txt"))
     config = _load_config(args)
+    if args.tracks is not None:
+        return _run_tracks(args, config)
     samples = read_samples(args.input, clip=args.clip, columns=config.inputs)
     if args.float:
         columns = dict(float_run(config, args.variant, samples.y))
@@ -441,6 +443,50 @@ def _run_filter(args):
         note.append(f"{samples.clipped} input value(s) saturated to the 16-bit range (--clip)")
     if not args.float:
         note.append(f"{int(np.count_nonzero(columns['overflow']))} sample(s) with overflow")
+    _info("; ".join(note))
+    return 0
+
+
+def _run_tracks(args, config):
+    """``kfpga filter --tracks N``: a multi-target replay through per-(track, axis) states."""
+    from kfpga.csvio import read_samples, write_columns
+    from kfpga.errors import InputError
+    from kfpga.fixedmodel import FixedModel
+    from kfpga.hw.alphabeta import MAX_TRACKS
+
+    if config.filter != "alpha-beta":
+        raise UsageError(f"--tracks applies to the alpha-beta filter (its many-track core), not to {config.filter}")
+    if args.tracks > MAX_TRACKS:
+        raise UsageError(f"--tracks must be 1..{MAX_TRACKS} (the tracker's limit), not {args.tracks}")
+    samples = read_samples(args.input, clip=args.clip, columns=("track", "axis", *config.inputs))
+    track, axis = samples.y["track"], samples.y["axis"]
+    for name, values, top in (("track", track, args.tracks - 1), ("axis", axis, 1)):
+        bad = np.flatnonzero((values < 0) | (values > top))
+        if bad.size:
+            k = int(bad[0])
+            raise InputError(f"{args.input}: line {k + 2}: {name} = {int(values[k])} is outside 0..{top}"
+                             + (f" (--tracks {args.tracks})" if name == "track" else ""))
+    state = 2 * track + axis
+    z = {name: samples.y[name] for name in config.inputs}
+    model = FixedModel(config, variant=args.variant)
+    if args.float:
+        columns = {o: np.zeros(len(state)) for o in config.output_names}
+        for s in np.unique(state):
+            idx = np.flatnonzero(state == s)
+            out = config.spec.reference(config.params, args.variant, *(z[n][idx].astype(float) for n in config.inputs))
+            for o in config.output_names:
+                columns[o][idx] = out[o]
+    else:
+        raw, overflow, _ = model.run_channels(z, state)
+        columns = {o: model.output_format(o).to_float(raw[o]) for o in config.output_names}
+        columns["overflow"] = overflow
+    write_columns(args.output, {"track": track, "axis": axis, **columns})
+    kind = "float64" if args.float else "bit-accurate fixed-point"
+    note = [f"{len(state)} plots of {len(np.unique(track))} track(s) filtered (alpha-beta, {kind}) -> {args.output}"]
+    if samples.clipped:
+        note.append(f"{samples.clipped} input value(s) saturated to the 16-bit range (--clip)")
+    if not args.float:
+        note.append(f"{int(np.count_nonzero(columns['overflow']))} plot(s) with overflow")
     _info("; ".join(note))
     return 0
 
@@ -868,6 +914,29 @@ def _run_testbench(args):
     return 0 if not args.run_icarus or result["icarus_exit"] == 0 else 1
 
 
+# -- evaluate --------------------------------------------------------------------------------
+
+
+def _run_evaluate_alpha_beta(args):
+    from kfpga import evaluation
+
+    plot = _check_plot(args.plot)
+    if args.targets > 256:
+        raise UsageError(f"--targets must be 1..256 (the tracker's limit), not {args.targets}")
+    seed = _pick_seed(args.seed)
+    _info(f"seed {seed}")
+    result = evaluation.alpha_beta(evaluation.AlphaBetaScenario(targets=args.targets), seed=seed)
+    if plot:
+        evaluation.alpha_beta_plot(result, plot)
+        _info(f"plot: {plot}")
+    if args.json:
+        _emit_json({k: result[k] for k in ("seed", "scenario", "rows", "costs")}
+                   | {"findings": evaluation.alpha_beta_findings(result)})
+    else:
+        print(evaluation.alpha_beta_table(result))
+    return 0
+
+
 # -- filters ---------------------------------------------------------------------------------
 
 
@@ -956,6 +1025,27 @@ def build_parser():
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_run_propose)
 
+    p = sub.add_parser("evaluate", help="rerun a source document's own evaluation: its scenario, table and plot",
+                       description="Rerun the evaluation of one of the source documents with its scenario and "
+                                   "baselines, print its table, and say how the figures compare with the document's "
+                                   "conclusions.")
+    ev = p.add_subparsers(dest="evaluation", metavar="NAME", required=True)
+    q = ev.add_parser("alpha-beta", help="seeds/004: alpha-beta tracking of radar targets against the moving mean and "
+                                         "the Kalman filter",
+                      description="Targets in straight-line uniform motion in 2-D radar pixel coordinates, with white "
+                                  "noise (2 px per axis) and plots rounded to whole pixels, tracked by the alpha-beta "
+                                  "filter (the paper's alpha = beta = 0.5, Benedict-Bordner and critically damped "
+                                  "beta at alpha = 0.5; float and bit-accurate), the moving mean of 5 plots and the "
+                                  "time-varying Kalman filter. Prints the RMSE of position and velocity, the "
+                                  "additions and multiplications per update (the paper's table 1, counted on each "
+                                  "filter's update), and how they compare with the paper.")
+    q.add_argument("--targets", type=_int_at_least(1, "an integer 1..256"), default=5, metavar="N",
+                   help="targets tracked at once, 1..256 (default: 5)")
+    q.add_argument("--seed", type=_seed, metavar="S", help="seed of the tracks and the noise (default: random, printed)")
+    q.add_argument("--json", action="store_true", help="print the table as JSON")
+    q.add_argument("--plot", metavar="PNG", help="draw the tracks and the position error against time")
+    q.set_defaults(func=_run_evaluate_alpha_beta)
+
     p = sub.add_parser("filters", help="list the registered filters, their variants, inputs and outputs",
                        description="List every registered filter with its variants, its inputs and outputs, and "
                                    "the document it comes from. Any of them can be given to the other commands "
@@ -973,6 +1063,10 @@ def build_parser():
     p.add_argument("--float", action="store_true", help="use the float64 reference instead of the bit-accurate model")
     p.add_argument("--config", metavar="TOML", help="model parameters and formats")
     p.add_argument("--clip", action="store_true", help="saturate out-of-range inputs instead of failing")
+    p.add_argument("--tracks", type=_int_at_least(1, "an integer 1..256"), metavar="N",
+                   help="alpha-beta filter only: replay a multi-target recording of N tracks, columns track "
+                        "(0..N-1), axis (0 or 1) and z, in the order the plots came; each track and axis has its "
+                        "own state, as in the many-track core; the output has track, axis, x, v")
     p.set_defaults(func=_run_filter)
 
     p = sub.add_parser("formats", help="show the quantisation formats (or write a config file to edit)",
@@ -1083,9 +1177,16 @@ def _subparsers(parser):
 
 
 def synopsis(width=110):
-    """The command synopsis of the README, written from the parser (so the two cannot drift)."""
+    """The command synopsis of the README, written from the parser (so the two cannot drift); a
+    command with sub-commands (``evaluate``) gets a line per sub-command."""
     lines = []
-    for name, p in _subparsers(build_parser()).items():
+
+    def add(name, p):
+        nested = [a for a in p._actions if isinstance(a, argparse._SubParsersAction)]
+        if nested:
+            for sub, q in nested[0].choices.items():
+                add(f"{name} {sub}", q)
+            return
         words = []
         for action in p._actions:
             if isinstance(action, argparse._HelpAction):
@@ -1106,6 +1207,9 @@ def synopsis(width=110):
             else:
                 line += " " + word
         lines.append(line)
+
+    for name, p in _subparsers(build_parser()).items():
+        add(name, p)
     return "\n".join(lines)
 
 

@@ -40,7 +40,7 @@ import numpy as np
 
 from kfpga.fixed import INT64_SAFE_BITS, Overflow, QFormat, Rounding, requantize, to_raw
 
-__all__ = ["Fx", "Ops", "IntOps", "FloatOps", "WidthOps", "FractionOps", "Intermediate", "divider_shift",
+__all__ = ["Fx", "Ops", "IntOps", "FloatOps", "WidthOps", "FractionOps", "CostOps", "update_cost", "Intermediate", "divider_shift",
            "quantise_fraction", "quotient_bits", "divide"]
 
 
@@ -480,6 +480,84 @@ class WidthOps(Ops):
 
 def _paren(text):
     return f"({text})" if any(c in text for c in " +-") else text
+
+
+# -- cost: operations per update ----------------------------------------------------------------------
+
+
+class CostOps(Ops):
+    """Counts the operations of an update as the datapath builds them (:attr:`counts`):
+
+    * ``additions``: every sum, difference and negation;
+    * ``multiplications``: products that take a multiplier (a variable by a variable, or by a
+      constant other than 0, +-1, +-2**k);
+    * ``shifts``: products by 0, +-1 or +-2**k (wiring, no multiplier);
+    * ``divisions``: the restoring divider.
+
+    Writes into a point (``rq``) are not counted: their rounding is part of the write.
+    """
+
+    def __init__(self, formats):
+        super().__init__(formats)
+        self.counts = {"additions": 0, "multiplications": 0, "shifts": 0, "divisions": 0}
+
+    def mul(self, a, b):
+        c = a.const if b.const is None else b.const
+        if a.const is not None and b.const is not None:
+            pass  # folded when the stage is built: no hardware
+        elif c is not None and (c == 0 or _power_of_two(c) is not None):
+            self.counts["shifts"] += 1
+        else:
+            self.counts["multiplications"] += 1
+        return super().mul(a, b)
+
+    def _input(self, raw, fmt, name):
+        return 0
+
+    def _const(self, raw, fmt, value, name):
+        return raw
+
+    def _zero(self):
+        return 0
+
+    def _shl(self, raw, n):
+        return 0
+
+    def _add(self, x, y):
+        self.counts["additions"] += 1
+        return 0
+
+    def _sub(self, x, y):
+        self.counts["additions"] += 1
+        return 0
+
+    def _neg(self, x):
+        self.counts["additions"] += 1
+        return 0
+
+    def _mul(self, x, y):
+        return 0
+
+    def _rq(self, raw, src_frac, fmt, name):
+        return 0, False
+
+    def _div(self, num, den, shift, fmt, name):
+        self.counts["divisions"] += 1
+        return 0, False
+
+
+def update_cost(config, variant):
+    """``{additions, multiplications, shifts, divisions}`` of one update of ``config``'s ``variant``,
+    counted by running its update on :class:`CostOps`."""
+    spec_variant = config.spec.variants[variant]
+    ops = CostOps(config.formats)
+    k = ops.constants(config.constants(variant))
+    state = {name: ops.input(0, point, name) for name, point in spec_variant.state_for(config.params)}
+    from kfpga.ads8364 import CODE_FORMAT
+
+    inputs = {name: ops.input(0, CODE_FORMAT, name) for name in config.inputs}
+    spec_variant.update(ops, k, state, inputs)
+    return dict(ops.counts)
 
 
 # -- exact rationals: the spec ----------------------------------------------------------------------

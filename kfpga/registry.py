@@ -14,6 +14,7 @@ __all__ = ["FILTERS", "DEFAULT", "get", "names", "specs", "spec_for", "register"
 FILTERS = {
     "kalman2": "kfpga.model.kalman2",
     "kalman": "kfpga.model.kalman",
+    "alpha-beta": "kfpga.model.alphabeta",
 }
 #: The paper's filter, used when a config or command names none.
 DEFAULT = "kalman2"

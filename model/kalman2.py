@@ -47,8 +47,8 @@ from kfpga.model.ranges import float_ranges, full_scale_stimulus
 from kfpga.model.reference import KalmanParams, kalman_decomposed, steady_error_std, steady_state, steady_state_gain
 from kfpga.spec import Constant, FilterSpec, Output, Point, Variant
 
-__all__ = ["SPEC", "POINTS", "t_exponent", "steady_gain", "predict", "innovation", "correct", "rate", "rate_operand",
-           "rate_product", "rate_write",
+__all__ = ["SPEC", "POINTS", "t_exponent", "steady_gain", "finish_formats", "predict", "innovation", "correct", "rate",
+           "rate_operand", "rate_product", "rate_write",
            "covariance_predict", "innovation_variance", "gains", "covariance_correct", "steady_update",
            "full_update"]
 
@@ -263,6 +263,12 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
     noise = ({"x1": min(err["x1"], err["yhat"]), "v": params.T * err["x2"], "vt": params.T * err["x2"], "x2": err["x2"]}
              if err else None)
     formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, noise=noise)
+    return finish_formats(params, formats, state_frac=state_frac)
+
+
+def finish_formats(params, formats, *, state_frac):
+    """The rules of the innovation and the rate output on top of the register rules, for the
+    filters of this loop (this one and the alpha-beta tracker): ``params`` has T and R."""
     # the innovation's step small against the measurement noise (more than the multiplier's 18
     # bits then: a second multiplier piece per product), but no finer than the states
     e = formats["e"]

@@ -37,6 +37,8 @@ async def core_bit_exact(dut):
     count = p.get("channels", 1)
     if p.get("order") == "round-robin":  # channels in turn: what a C-slow core takes at full rate
         channels = np.arange(n) % count
+    elif p.get("order") == "runs":  # random channels, each 1 to 3 times in a row (read-after-write)
+        channels = np.repeat(rng.integers(0, count, n), rng.integers(1, 4, n))[:n]
     else:
         channels = rng.integers(0, count, n) if count > 1 else np.zeros(n, dtype=int)
     await tb.reset()

@@ -132,7 +132,8 @@ def test_unknown_keys_are_rejected():
     with pytest.raises(ConfigError, match=exactly("formats.x1: rounding must be one of nearest, round, convergent, "
                                                   "floor, fix (half_up: nearest), not 'up'")):
         KalmanConfig.from_dict({"formats": {"x1": {"format": "Q18.8", "rounding": "up"}}})
-    with pytest.raises(ConfigError, match=exactly("config: filter.name: no filter named 'kalman9'; registered: kalman2, kalman")):
+    with pytest.raises(ConfigError, match=exactly("config: filter.name: no filter named 'kalman9'; "
+                                                  "registered: kalman2, kalman, alpha-beta")):
         KalmanConfig.from_dict({"filter": {"name": "kalman9"}})
     with pytest.raises(ConfigError, match=exactly(
             "config: unknown key(s) filter.T; [filter] has only name (the parameters go in [model])")):
