@@ -44,19 +44,10 @@ class AlphaBetaCore(SteadyKalman):
     cuts = CUTS
     max_channels = 2 * MAX_TRACKS
 
-    def __init__(self, config, *, channels=1, stages=4, index_bits=None):
-        super(SteadyKalman, self).__init__(config, "steady", channels=channels, stages=stages, index_bits=index_bits)
+    rate_output = "v"
 
     def outputs(self, live):
         return {"x": live["x1_next"], "v": live["v_next"]}
-
-    def output_steps(self):
-        def on_v(step):
-            return lambda ops, k, out: {**out, "v": step(ops, k, out["v"])}
-
-        if self.constants["t_shift"] is not None:
-            return [on_v(eq.rate)]
-        return [on_v(lambda ops, k, v: v), on_v(eq.rate_operand), on_v(eq.rate_product), on_v(eq.rate_write)]
 
     @property
     def m4k_blocks(self):

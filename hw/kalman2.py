@@ -100,20 +100,26 @@ class SteadyKalman(LoopPipeline):
     cuts = CUTS
     writes: ClassVar[dict] = MappingProxyType({"x1": "x1_next", "v": "v_next"})
 
-    def __init__(self, config, *, channels=1, stages=4):
-        super().__init__(config, "steady", channels=channels, stages=stages)
+    #: The output field that carries the rate v / T (the steps below write it).
+    rate_output = "x2"
+
+    def __init__(self, config, *, channels=1, stages=4, index_bits=None):
+        super().__init__(config, "steady", channels=channels, stages=stages, index_bits=index_bits)
 
     def outputs(self, live):
         return {"x1": live["x1_next"], "yhat": live["xl1"], "x2": live["v_next"]}
 
     def output_steps(self):
-        def on_x2(step):
-            return lambda ops, k, out: {**out, "x2": step(ops, k, out["x2"])}
+        name = self.rate_output
+
+        def on_rate(step):
+            return lambda ops, k, out: {**out, name: step(ops, k, out[name])}
 
         if self.constants["t_shift"] is not None:
-            return [on_x2(eq.rate)]
+            return [on_rate(eq.rate)]
         # the loop's result registered first: each step then has a cycle to itself
-        return [on_x2(lambda ops, k, v: v), on_x2(eq.rate_operand), on_x2(eq.rate_product), on_x2(eq.rate_write)]
+        return [on_rate(lambda ops, k, v: v), on_rate(eq.rate_operand), on_rate(eq.rate_product),
+                on_rate(eq.rate_write)]
 
 
 class FullKalman(Core):
