@@ -114,6 +114,15 @@ class AmaranthOps(Ops):
     def _shl(self, raw, n):
         return raw.shift_left(n)  # a constant shift, n bits wider (``<<`` by an int is a variable shift)
 
+    def _abs(self, x):
+        return Mux(x < 0, -x, x)  # -x is one bit wider: the most negative value stays exact
+
+    def _lt(self, x, y):
+        return x < y  # both signed: a signed comparison
+
+    def _mux(self, cond, x, y):
+        return Mux(cond, x, y)
+
     def _rq(self, raw, src_frac, fmt, name):
         return requantize(self.m, raw, src_frac, fmt, name=f"{self.prefix}{name}")
 

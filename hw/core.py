@@ -72,13 +72,13 @@ class Core(wiring.Component):
 
     def _states(self, names=None):
         """One register per channel for each state name (default: all of the variant's)."""
-        f = self.config.formats
         names = list(self.state_points) if names is None else names
-        return {n: state_array(self.channels, signed(f[self.state_points[n]].width), self.reset_state[n], n)
+        return {n: state_array(self.channels, signed(self.config.point_format(self.state_points[n]).width),
+                               self.reset_state[n], n)
                 for n in names}
 
     def _state_value(self, regs, name, channel):
-        fmt = self.config.formats[self.state_points[name]]
+        fmt = self.config.point_format(self.state_points[name])
         return Fx(select(regs[name], channel).as_signed(), fmt.frac_bits, None, fmt, name)
 
 

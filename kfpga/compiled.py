@@ -96,6 +96,17 @@ class TraceOps(Ops):
         corners = (x.lo * y.lo, x.lo * y.hi, x.hi * y.lo, x.hi * y.hi)
         return self._var(f"{x.expr} * {y.expr}", min(corners), max(corners))
 
+    def _abs(self, x):
+        lo, hi = (x.lo, x.hi) if x.lo >= 0 else (-x.hi, -x.lo) if x.hi <= 0 else (0, max(-x.lo, x.hi))
+        return self._var(f"abs({x.expr})", lo, hi)  # abs() of an int64 array is np.abs
+
+    def _lt(self, x, y):
+        return self._var(f"{x.expr} < {y.expr}", 0, 1)
+
+    def _mux(self, cond, x, y):
+        expr = f"np.where({cond.expr}, {x.expr}, {y.expr})" if self.vector else f"{x.expr} if {cond.expr} else {y.expr}"
+        return self._var(expr, min(x.lo, y.lo), max(x.hi, y.hi))
+
     def _site(self, name):
         self.sites.append(name)
         return len(self.sites) - 1

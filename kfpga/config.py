@@ -165,11 +165,16 @@ class FilterConfig:
         return {name: int(to_raw(c.value, fmt(c.point) if isinstance(c.point, str) else c.point)[0])
                 for name, c in self.constants(variant).items() if isinstance(c, Constant)}
 
+    def point_format(self, point):
+        """The format of ``point``: a point name's in :attr:`formats`, or ``point`` itself when it
+        is a structural :class:`~kfpga.fixed.QFormat` (a flag, not a configurable point)."""
+        return point if isinstance(point, QFormat) else self.formats[point]
+
     def reset_state(self, variant):
         """``{state name: raw int}``: the reset state of ``variant`` in its points' formats."""
         v = self.spec.variants[variant]
         points = dict(v.state_for(self.params))
-        return {name: int(to_raw(value, self.formats[points[name]])[0]) for name, value in v.initial(self.params).items()}
+        return {name: int(to_raw(value, self.point_format(points[name]))[0]) for name, value in v.initial(self.params).items()}
 
     def replace(self, **changes):
         """A copy with some fields changed (validated again)."""

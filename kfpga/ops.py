@@ -6,7 +6,8 @@ An update stage is a plain Python function over an ``ops`` object::
         return ops.rq(ops.add(x1, v), "xl1")          # xl1 = x1 + v
 
 Values are :class:`Fx`: a backend payload and its binary point (``frac``: the payload stands
-for ``raw * 2**-frac``). ``add``, ``sub``, ``neg``, ``mul`` and ``shift`` are exact; ``rq``
+for ``raw * 2**-frac``). ``add``, ``sub``, ``neg``, ``mul``, ``shift``, ``abs``, ``select``, ``min``,
+``max`` and ``sort2`` (a compare-exchange) are exact, ``gt`` gives a condition; ``rq``
 writes a value into the format of a quantisation point (the one place where bits are dropped,
 with the point's rounding and overflow rules, raising an overflow flag); ``div`` is the
 restoring divider of the time-varying filters. The rules every backend shares live here, in
@@ -174,6 +175,38 @@ class Ops:
         raw = self._scale(a.raw, n) if self.value_payload else a.raw
         return Fx(raw, a.frac - n, a.const, None)
 
+    # -- comparisons and selection ---------------------------------------------------------------
+    def abs(self, a):
+        """``|a|``, exact (one bit wider, as ``-a``)."""
+        return Fx(self._abs(a.raw), a.frac, None if a.const is None else abs(a.const))
+
+    def gt(self, a, b):
+        """The condition ``a > b`` (a backend truth value: a bool, a bool array, a 1-bit signal)."""
+        ra, rb, _ = self._aligned(a, b)
+        return self._lt(rb, ra)
+
+    def select(self, cond, a, b):
+        """``a`` where ``cond`` holds, else ``b``, at their common binary point (a multiplexer)."""
+        ra, rb, frac = self._aligned(a, b)
+        return Fx(self._mux(cond, ra, rb), frac)
+
+    def min(self, a, b):
+        """The smaller of ``a`` and ``b`` (one comparator, one multiplexer)."""
+        ra, rb, frac = self._aligned(a, b)
+        return Fx(self._mux(self._lt(rb, ra), rb, ra), frac)
+
+    def max(self, a, b):
+        """The larger of ``a`` and ``b`` (one comparator, one multiplexer)."""
+        ra, rb, frac = self._aligned(a, b)
+        return Fx(self._mux(self._lt(ra, rb), rb, ra), frac)
+
+    def sort2(self, a, b):
+        """``(min, max)`` of ``a`` and ``b``: one compare-exchange of a sorting network (one
+        comparator and a multiplexer per output)."""
+        ra, rb, frac = self._aligned(a, b)
+        swap = self._lt(rb, ra)
+        return Fx(self._mux(swap, rb, ra), frac), Fx(self._mux(swap, ra, rb), frac)
+
     # -- quantisation ------------------------------------------------------------------------
     def rq(self, a, point, name=None):
         """Write ``a`` into the format of ``point``: its rounding, its overflow rule, a flag."""
@@ -233,6 +266,17 @@ class Ops:
 
     def _mul(self, x, y):
         return x * y
+
+    def _abs(self, x):
+        return abs(x)  # ints, Fractions, floats and numpy arrays alike
+
+    def _lt(self, x, y):
+        return x < y
+
+    def _mux(self, cond, x, y):
+        if isinstance(cond, np.ndarray) or isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+            return np.where(cond, x, y)
+        return x if cond else y
 
     def _rq(self, raw, src_frac, fmt, name):
         raise NotImplementedError
@@ -459,6 +503,16 @@ class WidthOps(Ops):
         self.report.multipliers.append((f"{_paren(x.text)}*{_paren(y.text)}", x.width, y.width, x.points, y.points))
         return self._node(x.width + y.width, f"{_paren(x.text)}*{_paren(y.text)}", x.points | y.points, "product")
 
+    def _abs(self, x):
+        return self._node(x.width + 1, f"|{x.text}|", x.points, "sum")
+
+    def _lt(self, x, y):
+        self._node(max(x.width, y.width) + 1, f"{x.text} < {y.text}", x.points | y.points, "comparison")
+        return _W(1, f"{x.text} < {y.text}", x.points | y.points)
+
+    def _mux(self, cond, x, y):
+        return _W(max(x.width, y.width), f"({cond.text} ? {x.text} : {y.text})", x.points | y.points)
+
     def _rq(self, raw, src_frac, fmt, name):
         self.report.writes.append((name, raw.width, fmt))
         if self.report.intermediates and self.report.intermediates[-1].text == raw.text:
@@ -492,14 +546,18 @@ class CostOps(Ops):
     * ``multiplications``: products that take a multiplier (a variable by a variable, or by a
       constant other than 0, +-1, +-2**k);
     * ``shifts``: products by 0, +-1 or +-2**k (wiring, no multiplier);
-    * ``divisions``: the restoring divider.
+    * ``divisions``: the restoring divider;
+    * ``comparisons``: magnitude comparators (a compare-exchange of a sorting network is one,
+      whose two outputs are multiplexers);
+    * ``selections``: multiplexers between two values.
 
     Writes into a point (``rq``) are not counted: their rounding is part of the write.
     """
 
     def __init__(self, formats):
         super().__init__(formats)
-        self.counts = {"additions": 0, "multiplications": 0, "shifts": 0, "divisions": 0}
+        self.counts = {"additions": 0, "multiplications": 0, "shifts": 0, "divisions": 0, "comparisons": 0,
+                       "selections": 0}
 
     def mul(self, a, b):
         c = a.const if b.const is None else b.const
@@ -536,6 +594,19 @@ class CostOps(Ops):
         return 0
 
     def _mul(self, x, y):
+        return 0
+
+    def _abs(self, x):
+        self.counts["additions"] += 1  # a negation and a multiplexer on the sign
+        self.counts["selections"] += 1
+        return 0
+
+    def _lt(self, x, y):
+        self.counts["comparisons"] += 1
+        return 0
+
+    def _mux(self, cond, x, y):
+        self.counts["selections"] += 1
         return 0
 
     def _rq(self, raw, src_frac, fmt, name):

@@ -15,6 +15,7 @@ FILTERS = {
     "kalman2": "kfpga.model.kalman2",
     "kalman": "kfpga.model.kalman",
     "alpha-beta": "kfpga.model.alphabeta",
+    "53h": "kfpga.model.tukey53h",
 }
 #: The paper's filter, used when a config or command names none.
 DEFAULT = "kalman2"

@@ -1,0 +1,389 @@
+"""Tukey's 53H outlier smoother (seeds/002, SPEC §4): its equations, its online and offline forms, its spec.
+
+For a series ``x``:
+
+1. ``x1`` = running median of 5 of ``x``;
+2. ``x2`` = running median of 3 of ``x1``;
+3. ``x3(l) = x2(l-1)/4 + x2(l)/2 + x2(l+1)/4`` (Hanning);
+4. where ``|x(l) - x3(l)| > threshold``, ``x(l)`` is replaced by ``x3(l)``.
+
+**Online** (:data:`SPEC`, the model and the core): one output per input, 4 samples late: the
+output for the input ``x[n]`` is the decision on ``x[n-4]`` (the Hanning value centred there needs
+``x[n-8..n]``). The state carries what the next decision needs: the last four samples, the last
+two medians of 5 and the last two medians of 3. The first sample of a channel fills them all with
+itself, which is the series extended to the left by copies of its first sample: the first four
+outputs are that sample, and no reset value enters a median.
+
+**Offline** (:func:`offline`, the paper's improved version for the ends): the online smoother
+leaves the first and last four points without a centred window. The first 8 and the last 8
+points are reversed, the smoother runs again, and its decisions for the points that now lie
+inside (the paper's ``x'3(5..8)`` and ``x'3(l-7..l-4)``) replace those of the first and last 4.
+The same threshold test decides them as every other point (the paper says "replace"; a point
+within the threshold of its smoothed value is kept, as everywhere else). It needs at least 16
+points, so that the two reversed blocks do not overlap.
+
+**Fixed point.** Medians select samples, so they are exact in the samples' format (point ``x``,
+by default the 16-bit code itself). The Hanning weights are exact shifts: ``(a + 2 b + c) / 4``
+is formed exactly with two more fraction bits and written once into point ``x3`` with its
+rounding rule; by default ``x3`` is a 16-bit code rounded to the nearest, ties up
+(``floor(v + 1/2)``): a convex combination of codes rounded so stays within the codes, so it
+cannot overflow. The test ``|x - x3| > threshold`` is exact (the threshold is a constant of
+point ``threshold``), and the output ``y`` (point ``y``) is either the sample or ``x3``.
+
+**Thresholds from physical limits** (the paper, §3): a velocity cannot change by more than
+``a_max * T`` in one sample, an attitude angle by more than ``omega_max * T``
+(:func:`velocity_threshold`, :func:`attitude_threshold`, in codes of a given LSB).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+from kfpga.ads8364 import CODE_FORMAT, CODE_MAX
+from kfpga.fixed import QFormat, Rounding
+from kfpga.formats import precision_frac_bits
+from kfpga.params import number
+from kfpga.spec import Constant, FilterSpec, Output, Point, Variant
+
+__all__ = ["Tukey53HParams", "SPEC", "POINTS", "FLAG", "DELAY", "MIN_OFFLINE", "update", "median5", "median3",
+           "MEDIAN5", "MEDIAN3", "network_layer", "network_reads", "hanning_partial", "hanning", "residual", "decide",
+           "window_step", "primed_line", "reference", "offline", "velocity_threshold", "attitude_threshold"]
+
+#: Samples from an input to the output that decides it.
+DELAY = 4
+#: The shortest series :func:`offline` takes (its two reversed blocks of 8 must not overlap).
+MIN_OFFLINE = 16
+#: Largest threshold with a meaning: two 16-bit codes differ by at most this.
+MAX_THRESHOLD = float(2 * CODE_MAX + 1)
+#: The format of the "primed" flag of a channel's state (0 after reset, 1 once a sample came).
+FLAG = QFormat(2, 0)
+
+
+def velocity_threshold(a_max, T, lsb):
+    """``a_max * T`` in codes of ``lsb`` (the velocity a code stands for): the largest change of
+    a velocity in one sample (the paper: ``Tp = a_max T``)."""
+    for name, value in (("a_max", a_max), ("T", T), ("lsb", lsb)):
+        number(name, value, minimum=0.0, strict=True)
+    return a_max * T / lsb
+
+
+def attitude_threshold(omega_max, T, lsb):
+    """``omega_max * T`` in codes of ``lsb`` (the angle a code stands for): the largest change of
+    an attitude angle in one sample (the paper: ``T_phi = omega_max T``)."""
+    for name, value in (("omega_max", omega_max), ("T", T), ("lsb", lsb)):
+        number(name, value, minimum=0.0, strict=True)
+    return omega_max * T / lsb
+
+
+@dataclass(frozen=True, kw_only=True)
+class Tukey53HParams:
+    """Parameters of the 53H smoother (default: a ship's velocity in mm/s codes at 1 Hz, a_max = 0.5 m/s^2).
+
+    Parameters
+    ----------
+    threshold:
+        A sample further than this from its smoothed value (in input units: codes) is an
+        outlier and is replaced; > 0 and at most 65535 (two codes differ by no more).
+
+    Raises ``TypeError`` for a value of the wrong type and ``ValueError`` for a wrong value.
+    """
+
+    threshold: float = 500.0
+
+    def __post_init__(self):
+        value = number("threshold", self.threshold)
+        if not 0 < value <= MAX_THRESHOLD:
+            raise ValueError(f"threshold must be > 0 (in codes) and at most {MAX_THRESHOLD:g}, the largest difference "
+                             f"of two 16-bit codes, not {self.threshold!r}")
+        object.__setattr__(self, "threshold", value)
+
+
+POINTS = {
+    "x": Point("x", "a stored sample (the window, the medians of 5 and of 3)", frac=0),
+    "x3": Point("x3", "the Hanning value x3 = x2(l-1)/4 + x2(l)/2 + x2(l+1)/4", frac=0),
+    "y": Point("y", "the output: the sample, or x3 in its place", frac=0),
+    "threshold": Point("threshold", "the outlier threshold", constant=True),
+}
+
+STATE = (("w1", "x"), ("w2", "x"), ("w3", "x"), ("w4", "x"), ("a1", "x"), ("a2", "x"), ("b1", "x"), ("b2", "x"),
+         ("primed", FLAG))
+
+
+# -- the stages, one set for the model and the core ----------------------------------------------
+
+
+#: The median-of-5 selection network, layer by layer (the comparators of a layer run side by
+#: side): ``("sort", i, j)`` puts the smaller of values i, j at i and the larger at j;
+#: ``("min", i, j)`` only the smaller at i, ``("max", i, j)`` only the larger at j (the other
+#: output no later comparator reads). 7 comparators, 5 layers; the median ends at position 2.
+MEDIAN5 = (
+    (("sort", 0, 1), ("sort", 3, 4)),
+    (("max", 0, 3), ("min", 1, 4)),  # v0 is the smallest of four and v4 the largest: both out
+    (("sort", 1, 2),),
+    (("min", 2, 3),),
+    (("max", 1, 2),),
+)
+#: The median of 3: ``max(min(a, b), min(max(a, b), c))``; 3 comparators, 3 layers, at position 1.
+MEDIAN3 = (
+    (("sort", 0, 1),),
+    (("min", 1, 2),),
+    (("max", 0, 1),),
+)
+
+
+def network_layer(ops, values, layer):
+    """One layer of a comparator network over the list ``values``; returns the new list."""
+    out = list(values)
+    for kind, i, j in layer:
+        if kind == "sort":
+            out[i], out[j] = ops.sort2(values[i], values[j])
+        elif kind == "min":
+            out[i] = ops.min(values[i], values[j])
+        else:
+            out[j] = ops.max(values[i], values[j])
+    return out
+
+
+def network_reads(layers, result):
+    """``[positions read from layer n on]`` for n = 0..len(layers): what a pipeline register
+    after layer n - 1 must hold (the last entry: the result alone)."""
+    reads = [{result}]
+    for layer in reversed(layers):
+        reads.insert(0, reads[0] | {p for _, i, j in layer for p in (i, j)})
+    return [sorted(r) for r in reads]
+
+
+def median5(ops, a, b, c, d, e):
+    """The median of five (:data:`MEDIAN5`)."""
+    values = [a, b, c, d, e]
+    for layer in MEDIAN5:
+        values = network_layer(ops, values, layer)
+    return values[2]
+
+
+def median3(ops, a, b, c):
+    """The median of three (:data:`MEDIAN3`)."""
+    values = [a, b, c]
+    for layer in MEDIAN3:
+        values = network_layer(ops, values, layer)
+    return values[1]
+
+
+def hanning_partial(ops, before, centre):
+    """``before + 2 centre``: the first addition of the Hanning value (a shift, exact)."""
+    return ops.add(before, ops.shift(centre, 1))
+
+
+def hanning(ops, partial, after):
+    """``x3 = (partial + after) / 4 = before/4 + centre/2 + after/4``, exact until it is written
+    once into point ``x3``."""
+    return ops.rq(ops.shift(ops.add(partial, after), -2), "x3")
+
+
+def residual(ops, sample, x3):
+    """``|sample - x3|``, exact."""
+    return ops.abs(ops.sub(sample, x3))
+
+
+def decide(ops, k, sample, x3, distance):
+    """``y = x3`` where ``distance = |sample - x3| > threshold``, else the sample."""
+    return ops.rq(ops.select(ops.gt(distance, k["threshold"]), x3, sample), "y")
+
+
+def window_step(ops, x, sample):
+    """``(first, window)``: whether this is the channel's first sample (its state then fills
+    with it), and the window ``[sample, w1, w2, w3, w4]``, newest first."""
+    first = ops.gt(ops.const(1, FLAG, "1"), x["primed"])
+    s = ops.rq(sample, "x", "sample")
+    return first, [s] + [ops.select(first, s, x[f"w{i}"]) for i in range(1, 5)]
+
+
+def primed_line(ops, first, value, line):
+    """The delay line ``line`` (the previous values, newest first), filled with ``value`` on a
+    channel's first sample."""
+    return [ops.select(first, value, held) for held in line]
+
+
+def update(ops, k, x, u):
+    """One sample in, the decision on the sample 4 before out: ``(next state, outputs)``."""
+    first, window = window_step(ops, x, u["y"])
+    m5 = median5(ops, *window)
+    a1, a2 = primed_line(ops, first, m5, [x["a1"], x["a2"]])
+    m3 = median3(ops, m5, a1, a2)
+    b1, b2 = primed_line(ops, first, m3, [x["b1"], x["b2"]])
+    x3 = hanning(ops, hanning_partial(ops, b2, b1), m3)
+    y = decide(ops, k, window[4], x3, residual(ops, window[4], x3))
+    nxt = {"w1": window[0], "w2": window[1], "w3": window[2], "w4": window[3], "a1": m5, "a2": a1, "b1": m3, "b2": b1,
+           "primed": ops.const(1, FLAG, "1")}
+    return nxt, {"y": y}
+
+
+def _constants(params):
+    return {"threshold": Constant(params.threshold, "threshold", "threshold")}
+
+
+def _initial(params):
+    return {name: 0.0 for name, _ in STATE}
+
+
+VARIANTS = {
+    "online": Variant("online", "one sample in, the decision on the sample 4 before out; the first sample fills the "
+                                "window", STATE, _constants, _initial, update),
+}
+
+
+# -- float -----------------------------------------------------------------------------------------------
+
+
+def _online_float(x, threshold, x3_round=None):
+    """The online smoother on floats along the last axis, from the windows' definition (numpy's
+    median over sliding windows of the series extended by copies of its first sample):
+    ``(y, x3)``, each sample's decision and Hanning value 4 samples late. ``x3_round`` rounds
+    the Hanning values (the fixed-point rule), ``None`` keeps them exact."""
+    x = np.asarray(x, dtype=np.float64)
+    n = x.shape[-1]
+    if n == 0:
+        return x.copy(), x.copy()
+    pad = np.concatenate([np.repeat(x[..., :1], 2 * DELAY, axis=-1), x], axis=-1)
+    m5 = np.median(sliding_window_view(pad, 5, axis=-1), axis=-1)  # [j]: centred on pad[j + 2]
+    m3 = np.median(sliding_window_view(m5, 3, axis=-1), axis=-1)  # [j]: centred on pad[j + 3]
+    x3 = m3[..., :-2] / 4 + m3[..., 1:-1] / 2 + m3[..., 2:] / 4  # [j]: centred on pad[j + 4]
+    if x3_round is not None:
+        x3 = x3_round(x3)
+    centre = pad[..., DELAY:DELAY + n]
+    return np.where(np.abs(centre - x3) > threshold, x3, centre), x3
+
+
+def reference(params, variant, y):
+    """The float online smoother along the last axis of ``y``: ``{"y"}`` (exact Hanning values)."""
+    return {"y": _online_float(y, params.threshold)[0]}
+
+
+def offline(x, params=None, *, run=None):
+    """The improved offline 53H of a whole series (the last axis): every point decided, the ends
+    from the reversed run (module docstring). ``run(series) -> online outputs`` is the online
+    smoother to use: by default the float one with ``params``; the bit-accurate one is
+    ``lambda s: FixedModel(config).run(s).y``. Raises ``ValueError`` for fewer than 16 points."""
+    x = np.asarray(x)
+    n = x.shape[-1] if x.ndim else 0
+    if n < MIN_OFFLINE:
+        raise ValueError(f"the offline 53H needs at least {MIN_OFFLINE} points (it reverses the first and the last 8), "
+                         f"not {n}")
+    if run is None:
+        if params is None:
+            raise TypeError("offline needs params (the float smoother) or run")
+        threshold = params.threshold
+
+        def run(s):
+            return _online_float(s, threshold)[0]
+
+    y = np.asarray(run(x))
+    out = np.empty(y.shape, dtype=y.dtype)
+    out[..., DELAY:n - DELAY] = y[..., 2 * DELAY:]  # a centred window inside the series
+    flipped = x.copy()
+    flipped[..., :8] = x[..., :8][..., ::-1]
+    flipped[..., n - 8:] = x[..., n - 8:][..., ::-1]
+    yr = np.asarray(run(flipped))
+    # x(3..0) now lie at 4..7 and x(n-1..n-4) at n-8..n-5, inside: their decisions come 4 later
+    out[..., :DELAY] = yr[..., 11:7:-1]
+    out[..., n - DELAY:] = yr[..., n - 1:n - 5:-1]
+    return out
+
+
+# -- the spec's hooks ----------------------------------------------------------------------------------------
+
+
+def _points_for(params):
+    return list(POINTS)
+
+
+def _ranges(params, stimulus=None):
+    # a median selects a sample, a Hanning value lies between samples: nothing leaves the codes
+    return {"x": float(CODE_MAX), "x3": float(CODE_MAX), "y": float(CODE_MAX), "threshold": params.threshold}
+
+
+def _default_formats(params, ranges, *, operand_bits, state_frac):
+    """The samples' own 16 bits everywhere; x3 rounded to the nearest code; the threshold in as
+    many bits as it needs, and the fraction bits that hold it within 1 %."""
+    frac = precision_frac_bits(params.threshold)
+    int_bits = next(i for i in range(2, 20) if QFormat(i, frac).covers(params.threshold))
+    return {"x": CODE_FORMAT, "x3": QFormat(16, 0, Rounding.NEAREST), "y": CODE_FORMAT,
+            "threshold": QFormat(int_bits, frac, Rounding.NEAREST)}
+
+
+def _validate(config):
+    return None
+
+
+def _random_params(rng):
+    return Tukey53HParams(threshold=float(rng.choice([rng.uniform(0.3, 20.0), rng.uniform(20.0, 5000.0)])))
+
+
+def _goals(config, variant, channels=1):
+    """No multiplier; logic cells for 11 comparators and the registers of each channel's state."""
+    f = config.formats
+    regs = 4 * f["x"].width + 2 * f["x"].width + 2 * f["x"].width
+    return {"logic_cells": 1200 + channels * regs, "mul18": 0, "lut_levels": 10}
+
+
+def _scenario(name, n, seed, params):
+    """The test signals of ``compare``/``simulate``: the named scenario (with noise of variance
+    4) and seeded outliers (:func:`inject_outliers`); the truth is the clean signal, 4 samples
+    late as the output is."""
+    from kfpga.scenarios import random_accel, sine
+
+    if name == "sine":
+        truth, codes = sine(n, seed, noise_var=4.0)
+    elif name == "random-accel":
+        truth, codes = random_accel(n, seed, q=2.0, noise_var=4.0, T=1.0)
+    else:
+        raise ValueError(f"scenario must be one of sine, random-accel, not {name!r}")
+    # the output for input n decides sample n - 4: its truth is the clean signal 4 samples before
+    late = np.concatenate([np.repeat(truth[..., :1], DELAY, axis=-1), truth[..., :-DELAY]], axis=-1)[..., :n]
+    return late, inject_outliers(codes, seed, params.threshold)
+
+
+def inject_outliers(codes, seed, threshold, *, density=0.01, sizes=(3.0, 10.0, 50.0), burst=(1, 2)):
+    """``codes`` with seeded outliers: at ``density`` of the samples, a run of ``burst`` samples
+    (each run's length drawn from it) offset by ``size * threshold`` (a size drawn from
+    ``sizes``, either sign), saturated to the 16-bit codes."""
+    rng = np.random.default_rng([seed, 53])
+    out = np.array(codes, dtype=np.int64)
+    n = out.shape[-1]
+    starts = np.flatnonzero(rng.random(n) < density)
+    for s in starts:
+        length = int(rng.choice(burst))
+        offset = float(rng.choice(sizes)) * threshold * rng.choice([-1.0, 1.0])
+        out[..., s:s + length] = np.clip(np.round(out[..., s:s + length] + offset), -CODE_MAX - 1, CODE_MAX)
+    return out
+
+
+SPEC = FilterSpec(
+    name="53h",
+    summary="Tukey's 53H outlier smoother (medians of 5 and 3, Hanning, threshold test); 4 samples late",
+    source="seeds/002: Lü and Geng 2019, online smoothing of ship integrated-navigation data by 53H filtering",
+    params=Tukey53HParams,
+    points=POINTS,
+    inputs=(("y", "the sample (a 16-bit ADC code)"),),
+    outputs=(Output("y", "y", "the sample 4 before, or its smoothed value where it is an outlier"),),
+    variants=VARIANTS,
+    points_for=_points_for,
+    default_formats=_default_formats,
+    ranges=_ranges,
+    validate=_validate,
+    reference=reference,
+    core="kfpga.hw.tukey53h:make_core",
+    goals=_goals,
+    default_output="y",
+    random_params=_random_params,
+    scenario=_scenario,
+    presets={
+        "53h-velocity": ("a ship's velocity in mm/s codes at T = 1 s: threshold a_max*T with a_max = 0.5 m/s^2 "
+                         "(500 codes)", Tukey53HParams),
+        "53h-attitude": ("an attitude angle in 0.01 deg codes at T = 1 s: threshold omega_max*T with omega_max = "
+                         "3 deg/s (300 codes)", lambda: Tukey53HParams(threshold=attitude_threshold(3.0, 1.0, 0.01))),
+    },
+)
