@@ -1,6 +1,8 @@
-"""Top level: clock divider + ADS8364 controller + a registered filter's core + output port."""
+"""Top level: clock divider + ADS8364 controller (+ a 53H pre-filter) + a registered filter's core + output port."""
 
-from amaranth import ClockDomain, ClockSignal, Module, Signal, signed
+from typing import NamedTuple
+
+from amaranth import ClockDomain, ClockSignal, Const, Module, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.cdc import ResetSynchronizer
 from amaranth.lib.wiring import In, Out
@@ -8,7 +10,7 @@ from amaranth.lib.wiring import In, Out
 from kfpga.hw.ads8364 import ADS8364Controller, SampleLayout
 from kfpga.hw.clockdiv import ClockDivider
 
-__all__ = ["FilterSystem", "AdcFrontend", "PORTS", "ADC_PINS", "out_field"]
+__all__ = ["FilterSystem", "AdcFrontend", "PORTS", "ADC_PINS", "out_field", "PREFILTERS", "prefilter_core"]
 
 #: Top-level ports: name -> (direction, width, description). The pin table and the .sdc use it.
 PORTS = {
@@ -100,6 +102,32 @@ class AdcFrontend(wiring.Component):
         return m
 
 
+class _Words(NamedTuple):
+    """A stream of (ADC channel, sample) words, as the controller or the pre-filter gives them."""
+
+    valid: object
+    channel: object
+    sample: object
+
+
+#: Filters that can sit between the controller and the core.
+PREFILTERS = ("53h",)
+
+
+def prefilter_core(config, channels):
+    """The core of a pre-filter config (a 53H smoother) for ``channels`` ADC channels, checked:
+    its formats must not be able to overflow (its words reach the core unflagged)."""
+    from kfpga.fixedmodel import FixedModel
+
+    if config.filter not in PREFILTERS:
+        raise ValueError(f"the pre-filter must be one of {', '.join(PREFILTERS)}, not {config.filter}")
+    sites = FixedModel(config).kernel(False).sites
+    if sites:
+        raise ValueError(f"the pre-filter's formats can overflow (at {', '.join(sites)}); its output goes to the core "
+                         "unflagged, so it needs formats that cannot (its defaults)")
+    return config.spec.make_core(config, config.spec.default_variant, channels=channels)
+
+
 def out_field(config, name=None):
     """The output field that drives ``out_data`` (default: the filter's), checked."""
     name = config.spec.default_output if name is None else name
@@ -136,6 +164,11 @@ class FilterSystem(wiring.Component):
         EOC timeout in ADC CLK periods.
     out_field:
         The output field on ``out_data`` (default: the filter's, ``x1`` for the paper's).
+    prefilter:
+        ``None``, or the :class:`~kfpga.config.FilterConfig` of a 53H smoother
+        (``model/tukey53h.py``) between the controller and the core: every ADC channel read has
+        its own window, the core gets each sample 4 samples late, with its outliers (ADC
+        glitches) replaced. Its formats must be ones that cannot overflow (the defaults).
 
     Members
     -------
@@ -143,7 +176,7 @@ class FilterSystem(wiring.Component):
     """
 
     def __init__(self, config, *, variant=None, six_channel=False, channel=None, ratio=10, timeout_periods=40,
-                 out_field=None):
+                 out_field=None, prefilter=None):
         spec = config.spec
         self.six_channel = bool(six_channel)
         if self.six_channel:
@@ -162,6 +195,9 @@ class FilterSystem(wiring.Component):
         self.channel = self.adc[0]  # the channel reported on out_channel in single-channel mode
         self.ratio = ratio
         self.out_field = globals()["out_field"](config, out_field)
+        # checked first: a refused pre-filter leaves nothing built
+        self.prefilter = None if prefilter is None else prefilter_core(prefilter, 6 if six_channel or len(self.adc) > 1
+                                                                       else 1)
         # several inputs: all six are converted at one instant and read; the update takes its own
         self.frontend = AdcFrontend(six_channel=six_channel or len(self.adc) > 1, channel=self.channel, ratio=ratio,
                                     timeout_periods=timeout_periods)
@@ -182,13 +218,26 @@ class FilterSystem(wiring.Component):
                 m.d.comb += inner.eq(pin)
             else:
                 m.d.comb += pin.eq(inner)
-        # the controller's (ADC channel, sample) words feed the core's (channel state, y) input
+        # the controller's (ADC channel, sample) words, through the pre-filter when there is one
+        source = _Words(frontend.o.valid, frontend.o.payload.channel, frontend.o.payload.sample)
+        if self.prefilter is not None:
+            m.submodules.prefilter = pre = self.prefilter
+            m.d.comb += [pre.i.valid.eq(frontend.o.valid), frontend.o.ready.eq(pre.i.ready),
+                         pre.i.payload.y.eq(frontend.o.payload.sample)]
+            if self.prefilter.channels > 1:
+                m.d.comb += pre.i.payload.channel.eq(frontend.o.payload.channel)
+            channel = pre.o.payload.channel if self.prefilter.channels > 1 else Const(self.channel, 3)
+            source = _Words(pre.o.valid, channel, pre.o.payload.y)
+            ready = pre.o.ready
+        else:
+            ready = frontend.o.ready
+        # ... feed the core's (channel state, y) input
         names = self.config.inputs
         if len(names) == 1:
             m.d.comb += [
-                core.i.valid.eq(frontend.o.valid),
-                frontend.o.ready.eq(core.i.ready),
-                getattr(core.i.payload, names[0]).eq(frontend.o.payload.sample),
+                core.i.valid.eq(source.valid),
+                ready.eq(core.i.ready),
+                getattr(core.i.payload, names[0]).eq(source.sample),
             ]
         else:
             # the words of one conversion come in channel order: the inputs' samples are held
@@ -198,24 +247,24 @@ class FilterSystem(wiring.Component):
             held = {}
             for j in order[:-1]:
                 held[j] = Signal(signed(16), name=f"held_{names[j]}")
-                with m.If(frontend.o.valid & (frontend.o.payload.channel == self.adc[j])):
-                    m.d.sync += held[j].eq(frontend.o.payload.sample)
-            is_last = frontend.o.payload.channel == self.adc[last]
+                with m.If(source.valid & (source.channel == self.adc[j])):
+                    m.d.sync += held[j].eq(source.sample)
+            is_last = source.channel == self.adc[last]
             m.d.comb += [
-                core.i.valid.eq(frontend.o.valid & is_last),
-                frontend.o.ready.eq(~is_last | core.i.ready),
-                getattr(core.i.payload, names[last]).eq(frontend.o.payload.sample),
+                core.i.valid.eq(source.valid & is_last),
+                ready.eq(~is_last | core.i.ready),
+                getattr(core.i.payload, names[last]).eq(source.sample),
                 *(getattr(core.i.payload, names[j]).eq(held[j]) for j in held),
             ]
         if self.six_channel:  # the ADC's channel number is the core's channel state
-            m.d.comb += core.i.payload.channel.eq(frontend.o.payload.channel)
+            m.d.comb += core.i.payload.channel.eq(source.channel)
         # the output port has no backpressure: each estimate is presented for one cycle
         m.d.comb += [
             core.o.ready.eq(1),
             self.out_valid.eq(core.o.valid),
             self.out_data.eq(getattr(core.o.payload, self.out_field)),
             self.out_channel.eq(core.o.payload.channel if self.six_channel else self.channel),
-            self.out_overflow.eq(core.overflow),
+            self.out_overflow.eq(core.overflow if self.prefilter is None else core.overflow | self.prefilter.overflow),
             self.out_timeout.eq(frontend.timeout),
         ]
         return m

@@ -249,10 +249,37 @@ def _add_signal_args(p):
 
 
 def _add_design_args(p, channels_help):
-    """--filter, --variant, --channels, --config: the arguments of the commands that build hardware."""
+    """--filter, --variant, --channels, --config, --prefilter: the arguments of the commands that build hardware."""
     _add_filter_args(p)
     p.add_argument("--channels", type=int, choices=(1, 6), default=1, help=channels_help)
     p.add_argument("--config", metavar="TOML", help="model parameters and formats")
+    _add_prefilter_args(p)
+
+
+def _add_prefilter_args(p):
+    p.add_argument("--prefilter", choices=("53h",),
+                   help="put Tukey's 53H outlier smoother between the ADS8364 controller and the core: every ADC "
+                        "channel gets its own window, glitches are replaced, each sample reaches the core 4 "
+                        "samples late")
+    p.add_argument("--threshold", type=float, metavar="CODES",
+                   help="with --prefilter 53h: its outlier threshold in ADC codes (default: 500; a physical limit "
+                        "such as a_max*T or omega_max*T in codes)")
+
+
+def _prefilter(args):
+    """The pre-filter's config of ``--prefilter`` / ``--threshold``, or ``None``."""
+    if getattr(args, "prefilter", None) is None:
+        if getattr(args, "threshold", None) is not None:
+            raise UsageError("--threshold applies with --prefilter 53h only")
+        return None
+    from kfpga.config import FilterConfig
+    from kfpga.model.tukey53h import Tukey53HParams
+
+    try:
+        params = Tukey53HParams() if args.threshold is None else Tukey53HParams(threshold=args.threshold)
+    except (TypeError, ValueError) as exc:
+        raise UsageError(f"--threshold: {exc}") from None
+    return FilterConfig(filter=args.prefilter, params=params)
 
 
 def _run_compare(args):
@@ -261,8 +288,17 @@ def _run_compare(args):
     _check_signal_args(args)
     args.plot = _check_plot(args.plot)
     config = _load_config(args)
+    prefilter = _prefilter(args)
+    if prefilter is not None:
+        if len(config.inputs) != 1:
+            raise UsageError(f"--prefilter: compare takes a one-input filter here; {config.filter} has "
+                             f"{len(config.inputs)} inputs")
+        if args.plot:
+            raise UsageError("--plot does not apply with --prefilter (the table has the two runs)")
     truth, y, label = _samples_for(args, config, command="compare")
     _warn_precision(config)
+    if prefilter is not None:
+        return _compare_prefilter(args, config, prefilter, truth, y, label)
     result = compare(config, args.variant, y, truth, settle=args.settle, seed=args.seed if not args.input else None,
                      scenario=None if args.input else args.scenario)
     m = result.metrics
@@ -295,7 +331,65 @@ def _run_compare(args):
     return 0
 
 
+#: Full-scale ADC glitches ``compare --prefilter`` puts into a scenario's codes: this share of the samples.
+GLITCH_DENSITY = 0.005
+
+
+def _compare_prefilter(args, config, prefilter, truth, y, label):
+    """``compare --prefilter 53h``: the filter with and without the pre-filter on a glitchy signal."""
+    from kfpga.ads8364 import CODE_MAX, CODE_MIN
+    from kfpga.analysis import compare, sample_count
+    from kfpga.fixedmodel import FixedModel
+    from kfpga.model.tukey53h import DELAY
+
+    y = np.array(y, dtype=np.int64)
+    glitches = 0
+    if not args.input:  # a scenario: full-scale glitches at random samples, from the run's seed
+        rng = np.random.default_rng([args.seed, 2])
+        where = np.flatnonzero(rng.random(len(y)) < GLITCH_DENSITY)
+        y[where] = rng.choice([CODE_MIN, CODE_MAX], len(where))
+        glitches = len(where)
+    smoothed = FixedModel(prefilter).run(y).y
+    late = None if truth is None else np.concatenate([np.repeat(truth[:1], DELAY), truth[:-DELAY]])
+    runs = {}
+    for key, codes, t in (("without", y, truth), ("with", smoothed, late)):
+        m = compare(config, args.variant, codes, t, settle=args.settle, seed=None, scenario=None, limit_cycle=False).metrics
+        runs[key] = {k: m.get(k) for k in ("rmse_raw", "rmse_float", "rmse_fixed", "overflows", "settle", "field")}
+    replaced = int(np.sum(smoothed[DELAY:] != y[:-DELAY]))
+    m = {"filter": config.filter, "variant": args.variant, "samples": sample_count(y), "seed": None if args.input else args.seed,
+         "signal": label, "glitches": glitches if not args.input else None, "prefilter": prefilter.filter,
+         "threshold": prefilter.params.threshold, "replaced": replaced, "without_prefilter": runs["without"],
+         "with_prefilter": runs["with"]}
+    if args.json:
+        _emit_json(m)
+        return 0
+    field = runs["with"]["field"]
+    print(f"kfpga compare: {config.filter} filter, {args.variant} variant, {label}, {m['samples']} samples"
+          + (f", seed {m['seed']}" if m["seed"] is not None else "")
+          + (f", {glitches} full-scale glitches ({100 * GLITCH_DENSITY:g} % of the samples)" if not args.input else ""))
+    print(f"  53H pre-filter: threshold {m['threshold']:g} codes, {replaced} sample(s) replaced, each sample 4 late")
+    if runs["with"]["rmse_float"] is None:
+        print("  no truth for this signal: no RMSE (a CSV replay); the replaced count is above")
+        return 0
+    print(f"  RMSE of {field} vs truth (after {runs['with']['settle']} settling samples), codes:")
+    print(f"    {'':<26}{'its input':>11}{'float':>11}{'fixed':>11}{'overflows':>11}")
+    for key, text in (("without", "without the pre-filter"), ("with", "with the 53H pre-filter")):
+        r = runs[key]
+        raw = "-" if r["rmse_raw"] is None else f"{r['rmse_raw']:.4f}"
+        print(f"    {text:<26}{raw:>11}{r['rmse_float']:>11.4f}{r['rmse_fixed']:>11.4f}{r['overflows']:>11}")
+    return 0
+
+
 # -- sweep -----------------------------------------------------------------------------------
+
+
+def _require_word_lengths(config, command):
+    """Refuse a filter whose formats have no word length to trade: no multiplier operand, no
+    fraction bits of a state (the 53H smoother selects and averages its samples in their own 16 bits)."""
+    spec = config.spec
+    if not any(spec.points[name].operand for name in config.formats):
+        raise UsageError(f"{command} does not apply to the {spec.name} filter: it has no multiplier operand and no "
+                         "fraction bits to trade against error (see kfpga formats)")
 
 
 def _run_sweep(args):
@@ -306,6 +400,7 @@ def _run_sweep(args):
     _check_signal_args(args)
     args.plot = _check_plot(args.plot)
     config = _load_config(args)
+    _require_word_lengths(config, "sweep")
     if config.pinned:
         raise UsageError(f"sweep sets every format itself, so the formats {args.config} pins would be ignored "
                          f"({', '.join(config.pinned)}): remove its [formats] tables, or use compare")
@@ -362,6 +457,7 @@ def _run_propose(args):
     inputs += [args.input] if args.input else []
     out = str(check_output_file(args.out, option="--out", inputs=inputs, extensions=(".toml",))) if args.out else None
     config = _load_config(args)
+    _require_word_lengths(config, "propose")
     if config.pinned:
         raise UsageError(f"propose chooses every format itself, so the formats {args.config} pins would be ignored "
                          f"({', '.join(config.pinned)}): remove its [formats] tables")
@@ -429,8 +525,12 @@ def _run_filter(args):
     config = _load_config(args)
     if args.tracks is not None:
         return _run_tracks(args, config)
+    if args.offline and config.filter != "53h":
+        raise UsageError(f"--offline applies to the 53h filter (its offline smoother), not to {config.filter}")
     samples = read_samples(args.input, clip=args.clip, columns=config.inputs)
-    if args.float:
+    if args.offline:
+        columns = _offline_53h(args, config, samples.y)
+    elif args.float:
         columns = dict(float_run(config, args.variant, samples.y))
     else:
         model = FixedModel(config, variant=args.variant)
@@ -438,13 +538,32 @@ def _run_filter(args):
         columns = {**model.to_float(res), "overflow": res.overflow}
     write_columns(args.output, columns)
     kind = "float64" if args.float else "bit-accurate fixed-point"
-    note = [f"{len(samples)} samples filtered ({config.filter} filter, {args.variant} variant, {kind}) -> {args.output}"]
+    form = "offline" if args.offline else f"{args.variant} variant"
+    note = [f"{len(samples)} samples filtered ({config.filter} filter, {form}, {kind}) -> {args.output}"]
     if samples.clipped:
         note.append(f"{samples.clipped} input value(s) saturated to the 16-bit range (--clip)")
     if not args.float:
         note.append(f"{int(np.count_nonzero(columns['overflow']))} sample(s) with overflow")
     _info("; ".join(note))
     return 0
+
+
+def _offline_53h(args, config, y):
+    """``kfpga filter --offline``: the offline 53H of the whole file (every row decided)."""
+    from kfpga.errors import InputError
+    from kfpga.fixedmodel import FixedModel
+    from kfpga.model import tukey53h
+
+    if len(y) < tukey53h.MIN_OFFLINE:
+        raise InputError(f"{args.input}: {len(y)} rows; the offline 53H needs at least {tukey53h.MIN_OFFLINE} "
+                         "(it reverses the first and the last 8)")
+    if args.float:
+        return {"y": tukey53h.offline(y, config.params)}
+    model = FixedModel(config, variant=args.variant)
+    out = tukey53h.offline(y, run=lambda x: model.run(x).y)
+    # each row's flag from the run that decided it: the same mapping as the values
+    flags = tukey53h.offline(y, run=lambda x: model.run(x).overflow)
+    return {"y": model.output_format("y").to_float(out), "overflow": flags}
 
 
 def _run_tracks(args, config):
@@ -603,8 +722,9 @@ def _run_generate(args):
         field = out_field(config, args.out_field)
     except ValueError as exc:
         raise UsageError(f"--out-field: {exc}") from None
+    prefilter = _prefilter(args)
     manifest = write_project(args.out, config, variant=args.variant, six_channel=args.channels == 6,
-                             channel=args.channel, ratio=args.ratio, pins=args.pins, out_field=field)
+                             channel=args.channel, ratio=args.ratio, pins=args.pins, out_field=field, prefilter=prefilter)
     path = Path(args.out) / f"{TOP_NAME}.v"
     print(f"wrote {args.out}/: {', '.join(manifest['files'])}")
     where = "six channels" if args.channels == 6 else ", ".join(
@@ -613,6 +733,10 @@ def _run_generate(args):
           f"{manifest['out_data']['format']} on out_data, "
           f"latency {manifest['core']['latency_cycles']} cycles, {manifest['core']['cycles_per_update']} cycle(s) "
           f"per update; compile with: cd {args.out} && quartus_sh --flow compile {TOP_NAME}")
+    if prefilter is not None:
+        print(f"  53H pre-filter before the core: threshold {prefilter.params.threshold:g} codes, "
+              f"{manifest['prefilter']['channels']} channel window(s), 4 samples late, "
+              f"{manifest['prefilter']['latency_cycles']} cycles of latency, one sample per clock")
     if not args.no_lint:
         rc, out = verilator_lint(path, TOP_NAME, path.parent / "verilator_lint.vlt")
         if rc:
@@ -675,7 +799,8 @@ def _run_resources(args):
         bar.set_postfix_str("Kalman core (first run compiles Yosys, ~35 s)")
         results["core"] = estimate(core_v, core_v.stem)
         bar.update()
-        top_v, top = write_top(Path(tmp) / "top", config, variant=args.variant, six_channel=six)
+        top_v, top = write_top(Path(tmp) / "top", config, variant=args.variant, six_channel=six,
+                               prefilter=_prefilter(args))
         bar.set_postfix_str("whole design")
         results["whole_design"] = estimate(top_v, "kfpga_top", timing=io_timing())
         bar.update()
@@ -699,7 +824,8 @@ def _run_resources(args):
             "alone") if trimmed else None
     summary = {"filter": config.filter, "variant": args.variant, "channels": args.channels, **core, "goals": goals,
                "goals_met": met, "all_goals_met": all(met.values()),
-               "whole_design": results["whole_design"], "whole_design_note": note, "capacity": EP2C20}
+               "whole_design": results["whole_design"], "whole_design_note": note, "capacity": EP2C20,
+               "prefilter": args.prefilter}
     if args.json:
         _emit_json(summary)
         return 0
@@ -715,6 +841,8 @@ def _run_resources(args):
             ("worst path (ns, -8 estimate)", "worst_path_ns", None), ("Fmax estimate (MHz)", "fmax_mhz_estimate", None)]
     if args.ecp5:
         rows.append(("ECP5-85 -6 post-route Fmax (MHz)", "ecp5_fmax_mhz", None))
+    if args.prefilter:
+        print(f"  the whole design has the {args.prefilter} pre-filter between the controller and the core")
     print(f"  {'':<32}{'core':>8}{'whole design':>14}{'EP2C20':>9}   goal (core)")
     for label, key, cap in rows:
         goal = goals.get(key)
@@ -791,18 +919,29 @@ def _run_simulate(args):
     ok, why = simulator_available(args.simulator)
     if not ok:
         raise UsageError(f"{args.simulator} is not available: {why}")
-    params = _adc_source_params(args, config)
+    prefilter = _prefilter(args)
     six = args.channels == 6
     python_adc = args.adc_model == "python"
     if args.waves and not python_adc:
         raise UsageError("--waves needs --adc-model python: the waveforms come from the cocotb bench")
+    if prefilter is not None and python_adc:
+        raise UsageError("--prefilter runs with --adc-model verilog (the fast regression), not with the cocotb bench")
+    if args.glitches is not None:
+        if args.glitches < 1:
+            raise UsageError(f"--glitches must be a positive integer, not {args.glitches}")
+        if len(config.inputs) != 1:
+            raise UsageError("--glitches applies to a one-input filter (it counts the glitches of its channel)")
+    params = _adc_source_params(args, config)
+    if args.glitches is not None:
+        params.update({"glitch": True, "glitches": args.glitches})
     t0 = time.perf_counter()
     _info(f"building the {args.variant} design for {args.simulator} (cached under build/sim) ...")
     if python_adc:
         built = build(args.simulator, "top", config=config, variant=args.variant, six=six, channel=args.channel,
                       waves=args.waves)
     else:
-        built = system.build(args.simulator, config=config, variant=args.variant, six=six, channel=args.channel)
+        built = system.build(args.simulator, config=config, variant=args.variant, six=six, channel=args.channel,
+                             prefilter=prefilter)
     build_s = time.perf_counter() - t0
     bar = tqdm(total=args.samples, desc="co-simulation", unit="sample", file=sys.stderr, disable=args.quiet)
 
@@ -848,6 +987,9 @@ def _run_simulate(args):
         **{k: result.get(k) for k in ("max_abs_hw_minus_float", "max_abs_hw_minus_float_lsb", "sqnr_db", "rmse_raw",
                                       "rmse_float", "rmse_hw", "conversions", "timeout_flag", "overflow_flag",
                                       "sim_time_us")},
+        **{k: result[k] for k in ("glitches_injected", "glitches_in_reads", "glitch_bound", "glitches_after_prefilter",
+                                  "estimates_off_by_more_than_bound") if k in result},
+        "prefilter": None if prefilter is None else {"filter": prefilter.filter, "threshold": prefilter.params.threshold},
         "waves": waves,
     }
     if args.json:
@@ -866,6 +1008,14 @@ def _run_simulate(args):
             raw = "-" if summary["rmse_raw"] is None else f"{summary['rmse_raw']:.4f}"
             print(f"  RMSE vs truth           raw {raw}, float {summary['rmse_float']:.4f}, "
                   f"hardware {summary['rmse_hw']:.4f} codes")
+        if prefilter is not None:
+            print(f"  53H pre-filter          threshold {prefilter.params.threshold:g} codes, each sample 4 late")
+        if "glitches_injected" in summary:
+            after = summary.get("glitches_after_prefilter")
+            print(f"  ADC glitches            {summary['glitches_in_reads']} in the reads"
+                  + ("" if after is None else f", {after} left after the pre-filter")
+                  + f"; {summary['estimates_off_by_more_than_bound']} estimate(s) more than "
+                  f"{summary['glitch_bound']:g} codes from the truth")
         print(f"  ADC conversions {summary['conversions']}, timeout flag {summary['timeout_flag']}, "
               f"overflow flag {summary['overflow_flag']}, {summary['sim_time_us'] / 1000:.1f} ms simulated")
         print(f"  wall {wall:.1f} s (+ build {build_s:.1f} s), {summary['samples_per_s']:.0f} samples/s")
@@ -894,7 +1044,7 @@ def _run_testbench(args):
     params = _adc_source_params(args, config)
     _info(f"writing the testbench of {args.samples} estimates into {out} ...")
     info = write_testbench(out, config, variant=args.variant, six=args.channels == 6, channel=args.channel,
-                           samples=args.samples, params=params)
+                           samples=args.samples, params=params, prefilter=_prefilter(args))
     result = {**info, "out": str(out)}
     if args.run_icarus:
         _info("running it on Icarus ...")
@@ -1002,6 +1152,7 @@ def build_parser():
     _add_signal_args(p)
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the report")
     p.add_argument("--plot", metavar="PNG", help="draw truth, input, both estimates and the fixed - float error")
+    _add_prefilter_args(p)
     p.set_defaults(func=_run_compare)
 
     p = sub.add_parser("sweep", help="fixed-point error against word length, as a table and a PNG",
@@ -1099,6 +1250,10 @@ def build_parser():
                    help="alpha-beta filter only: replay a multi-target recording of N tracks, columns track "
                         "(0..N-1), axis (0 or 1) and z, in the order the plots came; each track and axis has its "
                         "own state, as in the many-track core; the output has track, axis, x, v")
+    p.add_argument("--offline", action="store_true",
+                   help="53h filter only: the offline smoother of the whole file, every row decided in place (the "
+                        "first and last 4 from the reversed ends, as the paper's improved 53H); at least 16 rows. "
+                        "Without it, row n holds the online decision on row n - 4")
     p.set_defaults(func=_run_filter)
 
     p = sub.add_parser("formats", help="show the quantisation formats (or write a config file to edit)",
@@ -1177,6 +1332,9 @@ def build_parser():
                         "conversion (default: verilog)")
     p.add_argument("--waves", action="store_true",
                    help="dump waveforms (slower) and copy them under build/waves/; with --adc-model python")
+    p.add_argument("--glitches", type=int, metavar="N",
+                   help="replace N samples (at random conversions, seeded) by full-scale ADC glitches, and count "
+                        "them in the reads, after the pre-filter and in the estimates")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_run_simulate)

@@ -24,8 +24,10 @@ class Scoreboard:
     report).
     """
 
-    def __init__(self, config, variant):
+    def __init__(self, config, variant, *, prefilter=None):
         self.model = FixedModel(config, variant=variant)
+        # a 53H pre-filter in front: each ADC channel's samples go through it first
+        self.prefilter = None if prefilter is None else FixedModel(prefilter)
         self.fields = ("channel", *self.model.outputs, "overflow", "sticky")
         self.segments = [([], [])]
 
@@ -57,9 +59,20 @@ class Scoreboard:
             codes = np.array([int(v) if not isinstance(v, dict) else int(v[names[0]]) for _, v in inputs], dtype=np.int64)
         else:
             codes = {n: np.array([int(v[n]) for _, v in inputs], dtype=np.int64) for n in names}
+        if self.prefilter is not None:
+            codes = self.prefiltered(codes, channels)
         outputs, overflow, _ = self.model.run_channels(codes, channels)
         return {"channel": channels, **outputs, "overflow": overflow.astype(int),
                 "sticky": np.logical_or.accumulate(overflow).astype(int)}
+
+    def prefiltered(self, codes, channels):
+        """The codes as the pre-filter passes them on: one channel state per channel for one
+        input, one per input (each has its ADC channel) for several. Its formats cannot overflow
+        (:func:`kfpga.hw.top.prefilter_core` refuses others), so it adds no flag."""
+        if isinstance(codes, dict):
+            return {n: self.prefilter.run(a).y for n, a in codes.items()}
+        outputs, _, _ = self.prefilter.run_channels(codes, channels)
+        return outputs["y"]
 
     def check(self, *, pending_allowed=0):
         """Compare everything; returns a report dict (``mismatches`` 0 means bit-exact).

@@ -43,22 +43,28 @@ __all__ = ["make_source", "Update", "updates_of", "conversions_for", "SystemReco
            "SystemRunFailed"]
 
 
-def load_config(params):
+def load_config(params, key="config_toml"):
     import tomllib
 
-    text = params.get("config_toml")
+    text = params.get(key)
     if not text:
         return FilterConfig()
     return FilterConfig.from_dict(tomllib.loads(text), source="config")
+
+
+def load_prefilter(params):
+    """The pre-filter's config of a run (``prefilter_toml``), or ``None``."""
+    return load_config(params, "prefilter_toml") if params.get("prefilter_toml") else None
 
 
 def make_source(params, count):
     """The analog source named by the parameters (a scenario or a CSV replay), seeded."""
     glitches = {}
     if params.get("glitch"):
-        # full-scale spikes on the filtered channels at a few conversions
+        # full-scale spikes on the filtered channels at a few conversions (5 unless told)
         rng = random.Random(params["seed"])
-        for k in rng.sample(range(5, max(count, 10)), min(5, max(count - 5, 1))):
+        wanted = int(params.get("glitches") or 5)
+        for k in rng.sample(range(5, max(count, 10)), min(wanted, max(count - 5, 1))):
             glitches[k] = (params.get("channel", 0) if not params.get("six") else rng.randrange(6),
                            rng.choice([CODE_MAX, CODE_MIN]))
     config = load_config(params)
@@ -128,6 +134,7 @@ class SystemRecords:
     def _setup_records(self, params, expected_conversions):
         self.params = params
         self.config = load_config(params)
+        self.prefilter = load_prefilter(params)
         self.variant = params["variant"]
         self.six = bool(params.get("six"))
         self.field = params.get("out_field") or self.config.spec.default_output
@@ -158,6 +165,8 @@ class SystemRecords:
             raw = codes[measured] if measured is not None else None
         else:
             codes = raw = np.array([r.codes for r in reads], dtype=np.int64)
+        if self.prefilter is not None:  # the float filter gets what the core got: the pre-filter's words
+            codes = Scoreboard(self.config, self.variant, prefilter=self.prefilter).prefiltered(codes, channels)
         fmt = self.config.output_format(self.field)
         hw = fmt.to_float([o[2] for o in self.outputs[:n]])
         flt = _per_channel_float(self.config, self.variant, channels, codes, self.field)
@@ -168,7 +177,8 @@ class SystemRecords:
         }
         truth = getattr(self.source, "truth", None)
         if truth is not None:
-            k = np.array([r.conversion for r in reads]) % truth.shape[1]
+            late = 4 if self.prefilter is not None else 0  # the pre-filter passes each sample on 4 later
+            k = np.maximum(np.array([r.conversion for r in reads]) - late, 0) % truth.shape[1]
             t = truth[channels, k]
             # each channel settles on its own: skip the first samples of every channel, not of the
             # interleaved stream (which would leave five channels' starts in the figures)
@@ -182,9 +192,52 @@ class SystemRecords:
                         "rmse_hw": rmse(hw[w], t[w]), "settle_per_channel": settle})
         return out
 
+    def glitch_figures(self):
+        """The injected ADC glitches of a one-input filter's run, counted where they go: in the
+        reads; in the pre-filter's words (its bit-accurate model on the same reads: the estimates
+        equal the model chain's, so these are the hardware's); and in the estimates, those further
+        than ``bound`` (the pre-filter's threshold, or the 53H default) from the truth."""
+        from kfpga.model.tukey53h import DELAY, Tukey53HParams
+
+        glitches = getattr(self.source, "glitches", {})
+        ups = self.updates()
+        n = min(len(self.outputs), len(ups))
+        if not glitches or n == 0 or isinstance(ups[0].codes, dict):
+            return {}
+        reads = ups[:n]
+        hits = np.array([glitches.get(r.conversion, (None,))[0] == r.channel for r in reads])
+        bound = self.prefilter.params.threshold if self.prefilter is not None else Tukey53HParams().threshold
+        out = {"glitches_injected": len(glitches), "glitches_in_reads": int(hits.sum()), "glitch_bound": bound}
+        channels = np.array([r.channel for r in reads])
+        clean = np.array([self.source.codes[r.channel, r.conversion % self.source.codes.shape[1]] for r in reads])
+        if self.prefilter is not None:
+            words = Scoreboard(self.config, self.variant, prefilter=self.prefilter).prefiltered(
+                np.array([r.codes for r in reads], dtype=np.int64), channels)
+            left = 0
+            for ch in np.unique(channels):
+                idx = np.flatnonzero(channels == ch)
+                # word j of a channel decides its read j - 4
+                left += int(np.sum(np.abs(words[idx][DELAY:] - clean[idx][:-DELAY]) > bound)) if len(idx) > DELAY else 0
+            out["glitches_after_prefilter"] = left
+        truth = getattr(self.source, "truth", None)
+        if truth is not None:
+            fmt = self.config.output_format(self.field)
+            hw = fmt.to_float([o[2] for o in self.outputs[:n]])
+            late = DELAY if self.prefilter is not None else 0
+            k = np.maximum(np.array([r.conversion for r in reads]) - late, 0) % truth.shape[1]
+            # each channel's first estimates settle from the reset state: skipped, as for the RMSE
+            rank = np.zeros(n, dtype=int)
+            for ch in np.unique(channels):
+                idx = np.flatnonzero(channels == ch)
+                rank[idx] = np.arange(len(idx))
+            settle = min(100, int(np.min(np.bincount(channels)[np.unique(channels)])) // 10)
+            off = (np.abs(hw - truth[channels, k]) > bound) & (rank >= settle)
+            out["estimates_off_by_more_than_bound"] = int(np.sum(off))
+        return out
+
     def report(self, wall_s, *, timeout_flag, overflow_flag, sim_time_us, pending_allowed=2):
         """Scoreboard over everything so far, plus the design's flags and the speed."""
-        sb = Scoreboard(self.config, self.variant)
+        sb = Scoreboard(self.config, self.variant, prefilter=self.prefilter)
         bounds = [*self.resets, float("inf")]
         reads = self.updates()
         outs = self.outputs
@@ -202,6 +255,7 @@ class SystemRecords:
         result = sb.check(pending_allowed=pending_allowed)
         if not self.resets:
             result.update(self._error_vs_float())
+            result.update(self.glitch_figures())
         result.update({
             "samples": result["compared"],
             "conversions": self.adc.conversions,
@@ -236,16 +290,17 @@ class SystemBuild:
     variant: str
     six: bool
     channel: int | None
+    prefilter: FilterConfig | None = None
 
 
-def write_sources(out_dir, config, *, variant, six=False, channel=None):
+def write_sources(out_dir, config, *, variant, six=False, channel=None, prefilter=None):
     """The generated top, the ADC model and ``kfpga_cosim`` (and its clock top) in ``out_dir``."""
     from kfpga.hw.generate import TOP_NAME, write_top
     from kfpga.hw.top import out_width
     from kfpga.sim import hdl
 
     out_dir = Path(out_dir)
-    _, top = write_top(out_dir, config, variant=variant, six_channel=six, channel=channel)
+    _, top = write_top(out_dir, config, variant=variant, six_channel=six, channel=channel, prefilter=prefilter)
     hdl.write_model(out_dir)
     (out_dir / f"{hdl.COSIM_NAME}.v").write_text(hdl.cosim_wrapper(TOP_NAME, out_width(config, top.out_field)))
     (out_dir / f"{hdl.COSIM_NAME}_clock.v").write_text(hdl.clock_top(hdl.COSIM_NAME))
@@ -306,17 +361,19 @@ def compile_cached(simulator, tag, write, top, *, root=DEFAULT_ROOT):
     return build_dir, [str(Path(iverilog_path()).with_name("vvp")), "-n", str(build_dir / "sim.vvp")]
 
 
-def build(simulator, *, config=None, variant=None, six=False, channel=None, root=DEFAULT_ROOT):
+def build(simulator, *, config=None, variant=None, six=False, channel=None, prefilter=None, root=DEFAULT_ROOT):
     """Generate and compile ``kfpga_cosim`` for ``simulator`` (cached by content under
-    ``build/sim/<simulator>/system-<hash>``); returns a :class:`SystemBuild`."""
+    ``build/sim/<simulator>/system-<hash>``); returns a :class:`SystemBuild`. ``prefilter``: the
+    config of a 53H smoother between the controller and the core."""
     from kfpga.sim import hdl
 
     config = FilterConfig() if config is None else config
     variant = variant or config.spec.default_variant
     build_dir, command = compile_cached(
-        simulator, "system", lambda folder: write_sources(folder, config, variant=variant, six=six, channel=channel),
+        simulator, "system", lambda folder: write_sources(folder, config, variant=variant, six=six, channel=channel,
+                                                          prefilter=prefilter),
         hdl.COSIM_NAME, root=root)
-    return SystemBuild(simulator, build_dir, command, config, variant, bool(six), channel)
+    return SystemBuild(simulator, build_dir, command, config, variant, bool(six), channel, prefilter)
 
 
 class _Records(SystemRecords):
@@ -337,6 +394,8 @@ def run(built, *, params, samples, on_progress=None, tag=None, timeout_s=None):
     params = {**params, "variant": built.variant, "six": built.six, "samples": samples}
     if "config_toml" not in params:
         params["config_toml"] = built.config.to_toml()
+    if built.prefilter is not None:
+        params["prefilter_toml"] = built.prefilter.to_toml()
     conversions = conversions_for(params, samples) + 8
     records = _Records(params, conversions)
     run_dir = built.build_dir / "runs" / f"{tag or 'run'}-{os.getpid()}"

@@ -51,7 +51,8 @@ def expected_words(config, variant, top, codes, samples):
     ups = updates_of(reads, config, list(top.adc))
     if len(ups) < samples:
         raise ValueError(f"{len(codes)} conversions make {len(ups)} updates, fewer than the {samples} estimates")
-    sb = Scoreboard(config, variant)
+    prefilter = getattr(top, "prefilter", None)
+    sb = Scoreboard(config, variant, prefilter=None if prefilter is None else prefilter.config)
     exp = sb.expected([(u.channel, u.codes) for u in ups[:samples]])
     return exp["channel"], exp[top.out_field], exp["sticky"]
 
@@ -154,14 +155,14 @@ def icarus_command(out_dir="."):
             ["vvp", "-n", f"{TB_NAME}.vvp"])
 
 
-def write_testbench(out_dir, config, *, variant, six=False, channel=None, samples=2000, params=None):
+def write_testbench(out_dir, config, *, variant, six=False, channel=None, samples=2000, params=None, prefilter=None):
     """Write the testbench folder (see the module's text); returns a dict describing it."""
     from kfpga.hw.generate import write_top
     from kfpga.hw.top import out_width
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    _, top = write_top(out_dir, config, variant=variant, six_channel=six, channel=channel)
+    _, top = write_top(out_dir, config, variant=variant, six_channel=six, channel=channel, prefilter=prefilter)
     (out_dir / "verilator_lint.vlt").unlink(missing_ok=True)
     hdl.write_model(out_dir)
     params = {**(params or {}), "variant": variant, "six": six, "config_toml": config.to_toml()}

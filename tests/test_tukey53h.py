@@ -1,0 +1,308 @@
+# amaranth: UnusedElaboratable=no
+"""The 53H smoother (seeds/002): the model against the method's own definition, the offline end
+handling, the comparator networks, the streaming core (any channel order, one sample per clock),
+the board's pre-filter with ADC glitches on both simulators, the evaluation and the CLI."""
+
+import itertools
+import json
+
+import numpy as np
+import pytest
+from simulators import need
+
+from kfpga.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.cli import main
+from kfpga.config import FilterConfig
+from kfpga.fixedmodel import FixedModel
+from kfpga.model import tukey53h as th
+from kfpga.ops import CostOps, IntOps
+from kfpga.sim.amaranth_streams import measure_timing, run_core
+
+CONFIG = FilterConfig(filter="53h")
+
+
+def definition(x, threshold):
+    """53H from the paper's four steps, written out with Python's statistics.median on every
+    window (nothing shared with the model): the decisions for x[4..n-5], each as an int."""
+    import statistics
+
+    n = len(x)
+    x1 = {i: statistics.median(x[i - 2:i + 3]) for i in range(2, n - 2)}
+    x2 = {i: statistics.median([x1[i - 1], x1[i], x1[i + 1]]) for i in range(3, n - 3)}
+    out = {}
+    for i in range(4, n - 4):
+        x3 = int(np.floor((x2[i - 1] + 2 * x2[i] + x2[i + 1]) / 4 + 0.5))  # rounded to the nearest code, ties up
+        out[i] = x3 if abs(x[i] - x3) > threshold else int(x[i])
+    return out
+
+
+def glitchy(rng, n, *, density=0.03):
+    x = np.round(3000 * np.sin(np.arange(n) / 15.0) + rng.normal(0, 20, n)).astype(np.int64)
+    hits = rng.random(n) < density
+    x[hits] = rng.choice([CODE_MIN, CODE_MAX, -20000, 20000], hits.sum())
+    return x
+
+
+# -- the model -------------------------------------------------------------------------------------------
+
+
+def test_model_equals_the_definition_in_the_interior(seed):
+    rng = np.random.default_rng(seed)
+    for threshold in (0.5, 40.0, 500.0, 7000.0):
+        x = glitchy(rng, 400)
+        y = FixedModel(FilterConfig(filter="53h", params=th.Tukey53HParams(threshold=threshold))).run(x).y
+        want = definition([int(v) for v in x], threshold)
+        got = {c: int(y[c + th.DELAY]) for c in want}  # the output for input c + 4 decides sample c
+        assert got == want, f"threshold {threshold}"
+
+
+def test_first_sample_fills_the_window_and_four_outputs_come_late():
+    x = np.array([1000, 1001, 999, 30000, 1002, 1000, 998, 1001, 1003, 1000, 999, 1002], dtype=np.int64)
+    y = FixedModel(CONFIG).run(x).y
+    # the series extended to the left by copies of its first sample: the first four outputs are it
+    assert y[:4].tolist() == [1000] * 4
+    assert y[4:7].tolist() == [1000, 1001, 999]
+    assert y[7] != 30000 and abs(int(y[7]) - 1000) < 5  # the glitch, replaced
+    # the float reference says the same (it only keeps the Hanning value exact)
+    assert th.reference(CONFIG.params, "online", x)["y"][7] == pytest.approx(float(y[7]), abs=0.5)
+
+
+def test_channels_are_independent_and_a_batch_equals_one_by_one(seed):
+    rng = np.random.default_rng(seed)
+    a, b = glitchy(rng, 300), glitchy(rng, 300)
+    model = FixedModel(CONFIG)
+    batch = model.run(np.stack([a, b])).y
+    assert np.array_equal(batch[0], model.run(a).y) and np.array_equal(batch[1], model.run(b).y)
+    channel = rng.permutation(np.repeat([0, 1], 300))  # the two series interleaved at random
+    codes = np.zeros(600, dtype=np.int64)
+    codes[channel == 0], codes[channel == 1] = a, b
+    outs, _, _ = model.run_channels(codes, channel)
+    assert np.array_equal(outs["y"][channel == 0], model.run(a).y)
+    assert np.array_equal(outs["y"][channel == 1], model.run(b).y)
+
+
+def test_default_formats_cannot_overflow():
+    """The interval analysis of the traced update finds no write that can overflow: a median is a
+    sample, a Hanning value lies between samples (and rounds to the nearest code)."""
+    assert FixedModel(CONFIG).kernel(False).sites == ()
+    x = np.array([CODE_MAX, CODE_MIN] * 50 + [CODE_MAX] * 20, dtype=np.int64)
+    assert not FixedModel(CONFIG).run(x).overflow.any()
+
+
+def test_narrow_formats_saturate_and_flag():
+    from kfpga.fixed import QFormat
+
+    config = FilterConfig(filter="53h", formats={"x": QFormat(12, 0)}, check_ranges=False)
+    res = FixedModel(config).run(np.array([100, 5000, -5000, 100], dtype=np.int64))
+    assert res.overflow[1] and res.overflow[2] and not res.overflow[0]
+
+
+@pytest.mark.parametrize("values", [range(5), range(3)])
+def test_median_networks_are_medians_for_every_order_and_tie(values):
+    """Every input of {0..k-1}^k (ties included), through IntOps, against numpy's median."""
+    k = len(values)
+    network = th.median5 if k == 5 else th.median3
+    ops = IntOps({})
+    fmt = th.FLAG.__class__(8, 0)
+    for combo in itertools.product(values, repeat=k):
+        got = network(ops, *(ops.input(v, fmt) for v in combo)).raw
+        assert got == int(np.median(combo)), combo
+
+
+def test_comparator_counts():
+    ops = CostOps({})
+    th.median5(ops, *(ops.input(0, th.FLAG) for _ in range(5)))
+    assert ops.counts["comparisons"] == 7 and ops.counts["multiplications"] == 0
+    ops = CostOps({})
+    th.median3(ops, *(ops.input(0, th.FLAG) for _ in range(3)))
+    assert ops.counts["comparisons"] == 3
+
+
+def test_offline_decides_every_point_and_handles_the_ends(seed):
+    rng = np.random.default_rng(seed)
+    # a slow signal, as navigation data is: reversing 8 points puts a corner into a steep one
+    clean = np.round(3000 * np.sin(np.arange(200) / 150.0) + 500)
+    x = (clean + rng.normal(0, 5, 200)).round().astype(np.int64)
+    x[[0, 2, 197, 199]] = [30000, -30000, 30000, -30000]  # outliers among the first and last 4
+    model = FixedModel(CONFIG)
+    out = th.offline(x, run=lambda s: model.run(s).y)
+    assert np.all(np.abs(out[[0, 2, 197, 199]] - clean[[0, 2, 197, 199]]) < 300)
+    assert np.all(np.abs(FixedModel(CONFIG).run(x).y[8:] - clean[:-8]) < 300)  # online: the same inside
+    # the interior is the online smoother's, 4 samples earlier
+    assert np.array_equal(out[4:-4], model.run(x).y[8:])
+    # the ends come from the reversed series: the first 8 and the last 8 reversed
+    flipped = x.copy()
+    flipped[:8], flipped[-8:] = x[:8][::-1], x[-8:][::-1]
+    yr = model.run(flipped).y
+    assert out[0] == yr[7 + th.DELAY] and out[3] == yr[4 + th.DELAY] and out[-1] == yr[len(x) - 8 + th.DELAY]
+    # float and fixed agree but for the rounding of x3
+    assert np.max(np.abs(th.offline(x, CONFIG.params) - out)) <= 0.5
+
+
+@pytest.mark.parametrize("n", [0, 5, 15])
+def test_offline_refuses_short_series(n):
+    with pytest.raises(ValueError, match="at least 16 points"):
+        th.offline(np.zeros(n, dtype=np.int64), CONFIG.params)
+
+
+@pytest.mark.parametrize(("value", "error"), [(0, ValueError), (-3.0, ValueError), (70000.0, ValueError),
+                                              (float("nan"), ValueError), ("5", TypeError), (True, TypeError)])
+def test_bad_threshold(value, error):
+    with pytest.raises(error, match="threshold"):
+        th.Tukey53HParams(threshold=value)
+
+
+def test_thresholds_from_physical_limits():
+    assert th.velocity_threshold(0.5, 1.0, 0.001) == pytest.approx(500.0)
+    assert th.attitude_threshold(3.0, 0.5, 0.01) == pytest.approx(150.0)
+    with pytest.raises(ValueError, match="a_max"):
+        th.velocity_threshold(0.0, 1.0, 0.001)
+
+
+# -- the core --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("channels", [1, 2, 6, 8])
+def test_core_bit_exact_any_channel_order_with_backpressure(channels, seed):
+    rng = np.random.default_rng(seed)
+    report = run_core(CONFIG, "online", glitchy(rng, 1200), seed=seed, channels=channels, p_idle=0.2, p_ready=0.6)
+    assert report["compared"] == 1200 and report["mismatches"] == 0
+
+
+def test_core_takes_one_sample_per_clock_of_the_same_channel():
+    dut = CONFIG.spec.make_core(CONFIG, "online", channels=6)
+    latency, accepted, produced = measure_timing(dut, CONFIG)
+    assert dut.cycles_per_update == 1 and set(accepted) == {1} and set(produced) == {1}
+    assert latency == dut.latency == 15
+
+
+def test_core_refuses_channel_counts():
+    with pytest.raises(ValueError, match="channels must be an integer 1..8"):
+        CONFIG.spec.make_core(CONFIG, "online", channels=0)
+    with pytest.raises(ValueError, match="channels must be an integer 1..8"):
+        CONFIG.spec.make_core(CONFIG, "online", channels=9)
+
+
+# -- the board's pre-filter -----------------------------------------------------------------------------------
+
+
+@pytest.mark.cosim
+@pytest.mark.parametrize("simulator", ["verilator", "icarus"])
+@pytest.mark.parametrize("six", [False, True])
+def test_prefilter_removes_adc_glitches_bit_exact(simulator, six, seed):
+    """The whole design with the pre-filter, full-scale glitches injected in the ADC model's codes:
+    every estimate equals the model chain (53H, then the Kalman filter); no glitch gets past the
+    pre-filter, no estimate strays; without it, they do."""
+    from kfpga.sim import system
+
+    need(simulator)
+    pre = FilterConfig(filter="53h")
+    samples = 1800 if simulator == "verilator" else 600
+    params = {"seed": seed, "glitch": True, "glitches": 6}
+    built = system.build(simulator, config=FilterConfig(), six=six, prefilter=pre)
+    r = system.run(built, params=params, samples=samples, tag=f"prefilter-{six}")
+    assert r["ok"] and r["mismatches"] == 0 and r["samples"] == samples, r.get("first_mismatches")
+    assert r["glitches_in_reads"] >= 1 and r["glitches_after_prefilter"] == 0
+    assert r["estimates_off_by_more_than_bound"] == 0
+    if not six:
+        bare = system.run(system.build(simulator, config=FilterConfig()), params=params, samples=samples, tag="bare")
+        assert bare["mismatches"] == 0 and bare["estimates_off_by_more_than_bound"] > 0
+
+
+def test_prefilter_that_could_overflow_is_refused():
+    from kfpga.fixed import QFormat
+    from kfpga.hw.top import FilterSystem
+
+    narrow = FilterConfig(filter="53h", formats={"x": QFormat(12, 0)}, check_ranges=False)
+    with pytest.raises(ValueError, match="can overflow"):
+        FilterSystem(FilterConfig(), prefilter=narrow)
+    with pytest.raises(ValueError, match="pre-filter must be one of 53h"):
+        FilterSystem(FilterConfig(), prefilter=FilterConfig(filter="alpha-beta"))
+
+
+def test_scoreboard_models_the_chain():
+    from kfpga.sim.scoreboard import Scoreboard
+
+    rng = np.random.default_rng(5)
+    x = glitchy(rng, 200)
+    board = Scoreboard(FilterConfig(), "steady", prefilter=CONFIG)
+    got = board.expected([(0, int(v)) for v in x])["x1"]
+    want = FixedModel(FilterConfig()).run(FixedModel(CONFIG).run(x).y).x1
+    assert np.array_equal(got, want)
+
+
+# -- evaluation and CLI ---------------------------------------------------------------------------------------------
+
+
+def test_baselines_against_their_definitions(seed):
+    from scipy.signal import savgol_filter
+
+    from kfpga.evaluation import cubic_smoothing, sliding_wls
+
+    rng = np.random.default_rng(seed)
+    x = rng.normal(0, 10, 60).cumsum()
+    np.testing.assert_allclose(cubic_smoothing(x), savgol_filter(x, 5, 3, mode="interp"), atol=1e-9)
+    out = sliding_wls(x, 4)
+    for c in range(len(x)):
+        lo, hi = max(0, c - 4), min(len(x), c + 5)
+        t = np.arange(lo, hi) - c
+        line = np.polyfit(t, x[lo:hi], 1, w=np.sqrt(1 - np.abs(t) / 5))
+        assert out[c] == pytest.approx(line[1], abs=1e-9)
+
+
+def test_evaluate_53h_cli(tmp_path, capsys, seed):
+    plot = tmp_path / "nav.png"
+    assert main(["evaluate", "53h", "--seed", str(seed), "--json", "--plot", str(plot)]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert plot.stat().st_size > 10000
+    rows = {(r["signal"], r["method"]): r for r in result["rows"]}
+    h53 = rows[("east velocity", "53H offline (improved ends), bit-accurate")]
+    cubic = rows[("east velocity", "5-point cubic smoothing")]
+    assert h53["outliers"] > 10 and h53["false_replacements"] == 0 and h53["removed_pct"] > 95
+    assert cubic["removed_pct"] < 50 and cubic["distorted"] > h53["distorted"]
+    limits = {r["case"]: r for r in result["limits"]}
+    assert limits["runs of 1"]["removed_pct"] == 100.0 and limits["runs of 3"]["removed_pct"] < 50
+    assert result["comparators"]["median of 5"]["comparisons"] == 7 and len(result["findings"]) == 5
+
+
+def test_filter_offline_cli(tmp_path, capsys):
+    src = tmp_path / "in.csv"
+    x = np.round(100 * np.sin(np.arange(40) / 5)).astype(int)
+    x[[0, 20, 39]] += 3000
+    src.write_text("y\n" + "\n".join(map(str, x)) + "\n")
+    out = tmp_path / "out.csv"
+    assert main(["filter", "--filter", "53h", "--input", str(src), "--output", str(out), "--offline"]) == 0
+    y = np.loadtxt(out, delimiter=",", skiprows=1)[:, 0]
+    assert len(y) == 40 and np.all(np.abs(y[[0, 20, 39]]) < 300) and y[10] == x[10]
+    short = tmp_path / "short.csv"
+    short.write_text("y\n1\n2\n3\n")
+    capsys.readouterr()
+    assert main(["filter", "--filter", "53h", "--input", str(short), "--output", str(out), "--offline"]) == 2
+    assert "needs at least 16" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["filter", "--input", "x.csv", "--output", "o.csv", "--offline"], "--offline applies to the 53h filter"),
+    (["generate", "--out", "g", "--threshold", "5"], "--threshold applies with --prefilter 53h only"),
+    (["generate", "--out", "g", "--prefilter", "53h", "--threshold", "0"], "threshold must be > 0"),
+    (["compare", "--prefilter", "53h", "--filter", "kalman", "--preset", "va2"], "one-input filter"),
+    (["compare", "--prefilter", "53h", "--plot", "p.png"], "--plot does not apply with --prefilter"),
+    (["sweep", "--filter", "53h"], "sweep does not apply to the 53h filter"),
+    (["propose", "--filter", "53h"], "propose does not apply to the 53h filter"),
+    (["simulate", "--prefilter", "53h", "--adc-model", "python"], "--prefilter runs with --adc-model verilog"),
+    (["simulate", "--glitches", "0"], "--glitches must be a positive integer"),
+])
+def test_cli_errors(argv, message, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "x.csv").write_text("y\n" + "\n".join(["1"] * 20) + "\n")
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert not (tmp_path / "g").exists() and not (tmp_path / "o.csv").exists()
+
+
+def test_compare_prefilter_cli(capsys, seed):
+    assert main(["compare", "--prefilter", "53h", "--seed", str(seed), "--samples", "4000", "--json"]) == 0
+    m = json.loads(capsys.readouterr().out)
+    assert m["glitches"] > 5 and m["replaced"] >= m["glitches"]
+    assert m["with_prefilter"]["rmse_fixed"] < 3.0 < 100 < m["without_prefilter"]["rmse_fixed"]
