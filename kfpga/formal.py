@@ -60,13 +60,13 @@ def divider_widths():
 
 
 def _cores():
-    """(label, core, capacity, drain) for every registered filter's default config and variant
-    with hardware."""
+    """(label, latency, drain, capacity, core factory, depth limit) for every registered filter's
+    default config (or its ``formal_config``) and variant with hardware."""
     from kfpga.config import FilterConfig
 
     out = []
     for spec in registry.specs():
-        config = FilterConfig(filter=spec.name)
+        config = FilterConfig(filter=spec.name) if spec.formal_config is None else spec.formal_config()
         for variant in spec.variants:
             if spec.variants[variant].hardware(config.params):
                 continue
@@ -77,13 +77,15 @@ def _cores():
             # and the cycles with o.ready high (and no input) after which nothing is left: a steady
             # core lets its held samples into the loop one per cycles_per_update; a time-varying
             # core finishes its update (its result register empties at once)
-            if hasattr(core, "stages"):
+            if hasattr(core, "capacity"):  # a core that states what it holds (a streaming pipeline)
+                capacity, drain = core.capacity, core.latency + 2
+            elif hasattr(core, "stages"):
                 capacity = 3 + core.output_stages
                 drain = core.latency + (capacity - 1) * core.cycles_per_update + 2
             else:
                 capacity, drain = 2, core.latency + 2
             out.append((f"{spec.name} {variant} core", core.latency, drain, capacity,
-                        lambda s=spec, c=config, v=variant: s.make_core(c, v)))
+                        lambda s=spec, c=config, v=variant: s.make_core(c, v), getattr(core, "formal_depth", None)))
     return out
 
 
@@ -124,10 +126,11 @@ def jobs():
             else:
                 # one whole conversion after the reset sequence, and the next HOLD
                 out.append(Job(label, prop, make, "bmc", conversion + 16, conversion + 16))
-    for label, latency, drain, capacity, make_core in _cores():
+    for label, latency, drain, capacity, make_core, limit in _cores():
         for prop in p.StreamProps.PROPERTIES:
             # the output contract needs a result made and held: one update; the others a drain too
             depth = latency + 8 if prop == "output contract" else drain + latency + 4
+            depth = depth if limit is None else min(depth, limit)  # a core may state the solver's reach
             out.append(Job(label, prop, lambda only, c=make_core, k=capacity, d=drain: p.StreamProps(c(), k, d, only=only),
                            "bmc", depth, depth))
     return out

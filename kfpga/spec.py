@@ -179,6 +179,11 @@ class FilterSpec:
     error_std:
         ``error_std(params) -> {output: std}``: the float filter's steady-state error of each
         output (input units), the yardstick of the outputs no truth comes with (``propose``).
+    formal_config:
+        ``formal_config() -> FilterConfig``: a narrow instance for the formal stream-contract
+        checks (``make formal``), for a core whose default datapath is too wide for the solver at
+        the depth its pipeline needs; its handshake logic must not depend on the formats.
+        ``None``: the default config.
     """
 
     name: str
@@ -203,6 +208,7 @@ class FilterSpec:
     measured: Callable | None = None
     adc: Callable | None = None
     error_std: Callable | None = None
+    formal_config: Callable | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "points", MappingProxyType(dict(self.points)))

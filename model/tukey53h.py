@@ -364,6 +364,17 @@ def inject_outliers(codes, seed, threshold, *, density=0.01, sizes=(3.0, 10.0, 5
     return out
 
 
+def _formal_config():
+    """3-bit samples for the formal stream checks: the core's handshake (one enable for every
+    stage, the valid bits) does not depend on the widths, and 16-bit comparator networks over
+    the 36 cycles that fill its 15 registers take the solver beyond a quarter of an hour."""
+    from kfpga.config import FilterConfig
+
+    narrow = QFormat(3, 0)
+    return FilterConfig(filter="53h", params=Tukey53HParams(threshold=1.0), check_ranges=False,
+                        formats={"x": narrow, "x3": QFormat(3, 0, Rounding.NEAREST), "y": narrow, "threshold": narrow})
+
+
 SPEC = FilterSpec(
     name="53h",
     summary="Tukey's 53H outlier smoother (medians of 5 and 3, Hanning, threshold test); 4 samples late",
@@ -389,4 +400,5 @@ SPEC = FilterSpec(
         "53h-attitude": ("an attitude angle in 0.01 deg codes at T = 1 s: threshold omega_max*T with omega_max = "
                          "3 deg/s (300 codes)", lambda: Tukey53HParams(threshold=attitude_threshold(3.0, 1.0, 0.01))),
     },
+    formal_config=_formal_config,
 )
