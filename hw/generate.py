@@ -44,10 +44,18 @@ _ESCAPED_MODULE = re.compile(r"^module \\(\S+) ", re.MULTILINE)
 
 def figures_only(elaboratable):
     """``elaboratable``, read for its figures only (latency, widths): not built, so Amaranth need
-    not warn that it was never used (its ``MustUse`` flag)."""
-    for obj in (elaboratable, getattr(elaboratable, "dut", None)):  # a harness and its block
-        if obj is not None:
-            obj._MustUse__silence = True
+    not warn that it was never used (its ``MustUse`` flag), nor for the blocks it holds (a
+    harness's ``dut``, a top level's frontend, core and pre-filter, and theirs)."""
+    from amaranth.hdl import Elaboratable
+
+    seen, todo = set(), [elaboratable]
+    while todo:
+        obj = todo.pop()
+        if id(obj) in seen:
+            continue
+        seen.add(id(obj))
+        obj._MustUse__silence = True
+        todo += [v for v in vars(obj).values() if isinstance(v, Elaboratable)]
     return elaboratable
 
 
