@@ -14,7 +14,7 @@ from kfpga.ads8364 import CODE_MAX, CODE_MIN
 from kfpga.errors import InputError
 from kfpga.paths import read_text
 
-__all__ = ["InputError", "Samples", "read_samples", "read_header", "write_columns"]
+__all__ = ["InputError", "Samples", "read_samples", "read_header", "write_columns", "read_series"]
 
 
 @dataclass
@@ -127,3 +127,33 @@ def write_columns(path, columns):
         writer.writerow(names)
         cells = [a.astype(int).tolist() if a.dtype.kind == "b" else a.tolist() for a in arrays]
         writer.writerows(zip(*cells, strict=True))
+
+
+def read_series(path, *, column=None):
+    """A series of real numbers from one column of a CSV file (lines starting with ``#`` are
+    comments): the only column, or the one named ``column``, or the last one. Every problem
+    raises :class:`InputError` with the file and line: no rows, a missing column, a cell that
+    is empty, not a number or not finite."""
+    path = Path(path)
+    text = read_text(path, what="file")
+    lines = [(n, line) for n, line in enumerate(text.splitlines(), start=1) if not line.lstrip().startswith("#")]
+    if not lines:
+        raise InputError(f"{path}: the file is empty (expected a header line and one number per row)")
+    rows = list(csv.reader([line for _, line in lines]))
+    names = [h.strip() for h in rows[0]]
+    if column is not None and column not in names:
+        raise InputError(f"{path}: line {lines[0][0]}: no column named {column!r} (the header has: {', '.join(names)})")
+    k = names.index(column) if column is not None else len(names) - 1
+    values = []
+    for (n, _), row in zip(lines[1:], rows[1:], strict=True):
+        cell = row[k].strip() if k < len(row) else ""
+        try:
+            value = float(cell)
+        except ValueError:
+            raise InputError(f"{path}: line {n}: {names[k]} = {cell!r} is not a number") from None
+        if not math.isfinite(value):
+            raise InputError(f"{path}: line {n}: {names[k]} = {cell!r} is not a finite number")
+        values.append(value)
+    if not values:
+        raise InputError(f"{path}: no rows after the header")
+    return np.array(values)
