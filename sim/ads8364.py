@@ -93,6 +93,7 @@ class ADS8364:
         self.conversions = 0
         self.eoc_pulses = 0
         self.eocs_dropped = 0
+        self._stuck = False
         self.reads = []  # Read tuples, in order
         self.clk_edges = 0
 
@@ -100,6 +101,11 @@ class ADS8364:
     def drop_eoc(self, count=1):
         """Complete the next ``count`` conversions without an EOC pulse (a broken board)."""
         self._drop += count
+
+    def stick_eoc(self, stuck=True):
+        """EOC stuck low from the next conversion's end on (a fault on its line: a reset does not
+        clear it), until ``stick_eoc(False)``; then it rises at the next CLK fall."""
+        self._stuck = stuck
 
     @property
     def converting(self):
@@ -181,7 +187,7 @@ class ADS8364:
             if self._clk_rise is not None:
                 self._min_width(t, "CLK high time", t - self._clk_rise)
             self._clk_fall = t
-            if self.eoc == 0:
+            if self.eoc == 0 and not self._stuck:
                 self.eoc = 1  # EOC low for half a CLK cycle
                 events.append((t, "eoc", 1))
         self._clk = level
@@ -202,6 +208,8 @@ class ADS8364:
         if self._drop:
             self._drop -= 1
             self.eocs_dropped += 1
+            return []
+        if self.eoc == 0:  # stuck low: no new edge
             return []
         self.eoc = 0
         self.eoc_pulses += 1
@@ -250,7 +258,7 @@ class ADS8364:
         self._pairs = set()
         self._start = None
         events = []
-        if self.eoc == 0:
+        if self.eoc == 0 and not self._stuck:
             self.eoc = 1
             events.append((t, "eoc", 1))
         return events

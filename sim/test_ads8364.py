@@ -5,7 +5,7 @@ conversion yields its words, in order, with the codes the ADC drove.
 """
 
 import cocotb
-from cocotb.triggers import with_timeout
+from cocotb.triggers import Timer, with_timeout
 
 from kfpga.sim.bench import FrontendTB, deadline, make_source, sim_params, write_results
 
@@ -50,3 +50,38 @@ async def missing_eoc_times_out(dut):
                       "mismatches": sum(a != b for a, b in zip(got, reads, strict=False))})
     assert tb.adc.eocs_dropped == 1 and int(dut.timeout.value) == 1
     assert got == reads[: len(got)] and len(got) >= n
+
+
+@cocotb.test(**deadline(40, default_samples=60))
+async def stuck_eoc_is_no_conversion(dut):
+    """EOC stuck low (a fault on its line): only its falling edge ends a conversion, the level
+    that stays does not. The timeout flag rises, no word comes while it stays low, and the
+    reads resume, each with the code the ADC drove, once it is released."""
+    p = sim_params()
+    n = int(p.get("samples", 60))
+    per = 6 if p.get("six") else 1
+    tb = FrontendTB(dut, p, make_source(p, 4 * n))
+    await tb.reset()
+    tb.pins.start()
+    collect = cocotb.start_soon(tb.sink.run(10 * n * per))
+
+    async def words_reach(count):
+        while len(tb.sink.words) < count:
+            await Timer(1, "us")
+
+    await with_timeout(words_reach(n // 3), 10_000 * n, "ns")
+    tb.adc.stick_eoc()
+    await Timer(20, "us")  # the conversion under way ends, EOC falls and stays low
+    stuck_at = len(tb.sink.words)
+    await Timer(200, "us")  # some 40 conversion times
+    during = len(tb.sink.words) - stuck_at
+    timeout = int(dut.timeout.value)
+    tb.adc.stick_eoc(False)
+    await with_timeout(words_reach(stuck_at + n // 3), 20_000 * n, "ns")
+    collect.cancel()
+    reads = [(r.channel, r.code) for r in tb.adc.reads]
+    got = [(w["channel"], w["sample"]) for w in tb.sink.words]
+    write_results(p, {"samples": len(got), "timeout_flag": timeout, "words_while_stuck": during,
+                      "mismatches": sum(a != b for a, b in zip(got, reads, strict=False))})
+    assert timeout == 1 and during == 0, f"{during} word(s) while EOC was stuck low, timeout flag {timeout}"
+    assert got == reads[: len(got)]

@@ -139,9 +139,25 @@ def test_restoring_divider_alone(simulator, seed):
 
 @pytest.mark.parametrize("six", [False, True], ids=["1ch", "6ch"])
 def test_controller_pin_protocol(simulator, six, seed):
-    result = run(build(simulator, "frontend", six=six, channel=3), "test_ads8364",
+    result = run(build(simulator, "frontend", six=six, channel=3), "test_ads8364", testcase="pin_protocol",
                  params={"seed": seed, "samples": 60, "six": six, "channel": 3})
     assert result["mismatches"] == 0 and result["samples"] == 60
+
+
+@pytest.mark.parametrize("six", [False, True], ids=["1ch", "6ch"])
+def test_controller_missing_eoc_times_out(simulator, six, seed):
+    result = run(build(simulator, "frontend", six=six, channel=3), "test_ads8364", testcase="missing_eoc_times_out",
+                 params={"seed": seed, "samples": 60, "six": six, "channel": 3})
+    assert result["mismatches"] == 0 and result["timeout_flag"] == 1 and result["eocs_dropped"] == 1
+
+
+@pytest.mark.parametrize("six", [False, True], ids=["1ch", "6ch"])
+def test_controller_stuck_eoc_is_no_conversion(simulator, six, seed):
+    """EOC stuck low: no word without a falling edge, the timeout flag, and reads again after."""
+    result = run(build(simulator, "frontend", six=six, channel=3), "test_ads8364", testcase="stuck_eoc_is_no_conversion",
+                 params={"seed": seed, "samples": 60, "six": six, "channel": 3})
+    assert result["mismatches"] == 0 and result["timeout_flag"] == 1 and result["words_while_stuck"] == 0
+    assert result["samples"] >= 40
 
 
 # -- the whole design ----------------------------------------------------------------------
