@@ -1144,6 +1144,24 @@ def _run_evaluate_roll(args):
     return 0
 
 
+def _run_evaluate_ls_frontend(args):
+    from kfpga import evaluation
+
+    plot = _check_plot(args.plot)
+    seed = _pick_seed(args.seed)
+    _info(f"seed {seed}")
+    result = evaluation.ls_frontend(seed=seed)
+    if plot:
+        evaluation.ls_frontend_plot(result, plot)
+        _info(f"plot: {plot}")
+    if args.json:
+        _emit_json({k: result[k] for k in ("seed", "scenario", "params", "rows", "windows")}
+                   | {"findings": evaluation.ls_frontend_findings(result)})
+    else:
+        print(evaluation.ls_frontend_table(result))
+    return 0
+
+
 # -- filters ---------------------------------------------------------------------------------
 
 
@@ -1285,6 +1303,19 @@ def build_parser():
     q.add_argument("--json", action="store_true", help="print the tables as JSON")
     q.add_argument("--plot", metavar="PNG", help="draw the roll, its predictions and their errors (the paper's figs. 4-5)")
     q.set_defaults(func=_run_evaluate_roll)
+    q = ev.add_parser("ls-frontend", help="seeds/003: the least-squares pseudo-acceleration front end of a Kalman "
+                                          "filter, on a ship decelerating to a stop",
+                      description="A ship at constant speed decelerating at a constant rate to a stop, its speed log "
+                                  "noisy (the patent's fig. 4). The patent's four curves: the Kalman filter fed with "
+                                  "the least-squares line's velocity and slope (window Ns from the innovation), the "
+                                  "Kalman filter observing velocity and a measured acceleration, the velocity-only "
+                                  "Kalman filter and the moving average. Prints noise suppression (RMSE at constant "
+                                  "speed and stopped) and responsiveness (onset delay, lag in the ramp, undershoot "
+                                  "after the stop), and how they compare with the patent.")
+    q.add_argument("--seed", type=_seed, metavar="S", help="seed of the speed log's noise (default: random, printed)")
+    q.add_argument("--json", action="store_true", help="print the table as JSON")
+    q.add_argument("--plot", metavar="PNG", help="draw the estimates through the deceleration and their errors")
+    q.set_defaults(func=_run_evaluate_ls_frontend)
 
     p = sub.add_parser("filters", help="list the registered filters, their variants, inputs and outputs",
                        description="List every registered filter with its variants, its inputs and outputs, and "
