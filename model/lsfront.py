@@ -25,6 +25,7 @@ correlated in time, which the filter does not know: the patent's design, kept as
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -73,7 +74,7 @@ class LSFrontParams:
                                  f"suppress), not {n!r}")
             if not t > 0:
                 raise ValueError(f"a threshold must be > 0, not {t!r}")
-        if any(b[0] <= a[0] for a, b in zip(rows, rows[1:], strict=False)):
+        if any(b[0] <= a[0] for a, b in itertools.pairwise(rows)):
             raise ValueError(f"the thresholds must rise, not {[t for t, _ in rows]}")
         if rows[-1][0] != math.inf:
             raise ValueError("the last threshold must be inf: every innovation needs a window")
