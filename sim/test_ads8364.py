@@ -85,3 +85,29 @@ async def stuck_eoc_is_no_conversion(dut):
                       "mismatches": sum(a != b for a, b in zip(got, reads, strict=False))})
     assert timeout == 1 and during == 0, f"{during} word(s) while EOC was stuck low, timeout flag {timeout}"
     assert got == reads[: len(got)]
+
+
+@cocotb.test(**deadline(40, default_samples=60))
+async def ready_does_not_pace_the_conversions(dut):
+    """The consumer's ready, low at random while the output register is empty, slows nothing:
+    the controller converts at its own rate (23 CLK periods a conversion with one read, 33 with
+    six) as long as each word is taken before the next read."""
+    p = sim_params()
+    six = bool(p.get("six"))
+    tb = FrontendTB(dut, {**p, "p_ready": 0.3}, make_source(p, 2000))
+    await tb.reset()
+    tb.pins.start()
+    collect = cocotb.start_soon(tb.sink.run(100_000))
+    await Timer(30, "us")  # past the reset sequence
+    first = tb.adc.conversions
+    span_us = 1000
+    await Timer(span_us, "us")
+    count = tb.adc.conversions - first
+    collect.cancel()
+    expected = span_us / ((33 if six else 23) * 0.2)  # CLK periods of 0.2 us (5 MHz)
+    reads = [(r.channel, r.code) for r in tb.adc.reads]
+    got = [(w["channel"], w["sample"]) for w in tb.sink.words]
+    write_results(p, {"samples": len(got), "conversions": count, "expected_conversions": expected,
+                      "mismatches": sum(a != b for a, b in zip(got, reads, strict=False))})
+    assert abs(count - expected) <= 1, f"{count} conversions in {span_us} us, {expected:.1f} at the controller's own rate"
+    assert got == reads[: len(got)]

@@ -160,6 +160,14 @@ def test_controller_stuck_eoc_is_no_conversion(simulator, six, seed):
     assert result["samples"] >= 40
 
 
+@pytest.mark.parametrize("six", [False, True], ids=["1ch", "6ch"])
+def test_controller_ready_does_not_pace_the_conversions(simulator, six, seed):
+    """ready low at random while the output is empty: the conversions keep their own rate."""
+    result = run(build(simulator, "frontend", six=six, channel=3), "test_ads8364",
+                 testcase="ready_does_not_pace_the_conversions", params={"seed": seed, "six": six, "channel": 3})
+    assert result["mismatches"] == 0 and abs(result["conversions"] - result["expected_conversions"]) <= 1
+
+
 # -- the whole design ----------------------------------------------------------------------
 
 
