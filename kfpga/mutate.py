@@ -91,7 +91,7 @@ def blocks():
               "kalman2 full core"),
         Block("top level", "top", {"variant": "steady", "channel": 1},
               lambda: FilterSystem(config, variant="steady", channel=1), TOP_NAME, "", "test_top",
-              {"variant": "steady", "samples": 40, "channel": 1}, "system_bit_exact"),
+              {"variant": "steady", "samples": 60, "channel": 1, "scenario": "stress"}, "system_bit_exact"),
     ]
 
 

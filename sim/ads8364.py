@@ -94,6 +94,7 @@ class ADS8364:
         self.eoc_pulses = 0
         self.eocs_dropped = 0
         self._stuck = False
+        self.hold_low_ns = ([], [], [])  # each HOLD pulse's low time, per pair
         self.reads = []  # Read tuples, in order
         self.clk_edges = 0
 
@@ -222,6 +223,7 @@ class ADS8364:
         if level:
             if self._hold_fall[pair] is not None:
                 self._min(t, "tHOLDL", t - self._hold_fall[pair])
+                self.hold_low_ns[pair].append(t - self._hold_fall[pair])
             self._hold_rise[pair] = t
             return []
         self._min(t, "tHOLDH", t - self._hold_rise[pair])

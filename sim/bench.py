@@ -179,6 +179,16 @@ class SystemTB(SystemRecords):
     def start(self):
         self.pins.start()
         cocotb.start_soon(self._monitor())
+        cocotb.start_soon(self._static_pins())
+
+    async def _static_pins(self):
+        """(BYTE, ADD, WR) at every read (RD falling): pins the ADC model does not watch."""
+        self.pin_levels = []
+        falling = FallingEdge(self.dut.adc_rd_n)
+        while True:
+            await falling
+            self.pin_levels.append((int(self.dut.adc_byte.value), int(self.dut.adc_add.value),
+                                    int(self.dut.adc_wr_n.value)))
 
     async def _monitor(self):
         rising = RisingEdge(self.dut.out_valid)

@@ -69,6 +69,11 @@ def make_source(params, count):
                            rng.choice([CODE_MAX, CODE_MIN]))
     config = load_config(params)
     adc = params.get("adc") or [params.get("channel") or 0]
+    if params.get("scenario") == "stress":  # every code bit and both extremes, on every channel
+        from kfpga.sim.sources import Source, stress_codes
+
+        codes = np.stack([stress_codes(params["seed"] + 101 * c, max(count, 64)) for c in range(6)])
+        return Source(codes, glitches=glitches, name=f"stress (seed {params['seed']})")
     if params.get("csv"):
         source = csv_source(params["csv"], clip=params.get("clip", False), config=config, adc=adc)
         source.glitches = glitches

@@ -62,6 +62,23 @@ async def system_bit_exact(dut):
     assert abs(tb.adc.conversions * per_conversion - len(tb.updates())) <= per_conversion, report
     assert abs(tb.adc.conversions * reads_per_conversion - len(tb.adc.reads)) <= reads_per_conversion, report
     assert report["timeout_flag"] == 0
+    check_pins(dut, tb, p)
+
+
+def check_pins(dut, tb, p):
+    """The pins the model does not read, and the controller's own HOLD protocol: each HOLD that
+    starts conversions goes low for exactly one CLK period per conversion (the idle level high),
+    the others stay high; BYTE and ADD low and WR high throughout (sampled at every read)."""
+    used = {0, 1, 2} if p.get("six") or len(tb.adc_channels) > 1 else {p.get("channel", 0) // 2}
+    for pair, widths in enumerate(tb.adc.hold_low_ns):
+        if pair in used:
+            assert len(widths) >= tb.adc.conversions - 1, \
+                f"HOLD{'ABC'[pair]}: {len(widths)} pulses, {tb.adc.conversions} conversions"
+            assert all(abs(w - 1000 * PERIOD_US) < 1.0 for w in widths), f"HOLD{'ABC'[pair]} low for {sorted(set(widths))} ns"
+        else:
+            assert not widths, f"HOLD{'ABC'[pair]} pulsed, but this design converts with HOLD{'ABC'[min(used)]}"
+    assert tb.pin_levels and all(levels == (0, 0, 1) for levels in tb.pin_levels), \
+        f"BYTE, ADD, WR not held at 0, 0, 1: {sorted(set(tb.pin_levels))}"
 
 
 @cocotb.test(**deadline(20, default_samples=100))

@@ -196,6 +196,16 @@ def test_system_bit_exact_python_adc(simulator, variant, seed):
     check(result, samples)
 
 
+def test_system_stress_codes_and_pins(simulator, seed):
+    """Codes over every bit and both extremes (``stress_codes`` on all six channels) through the
+    whole design, and the pins the ADC model does not read: each HOLD pulse one CLK period, the
+    unused HOLDs high, BYTE and ADD low, WR high (``sim/test_top.py``, ``check_pins``)."""
+    result = run(build(simulator, "top", variant="steady", channel=1), "test_top", testcase="system_bit_exact",
+                 params={"variant": "steady", "seed": seed, "samples": 120, "channel": 1, "scenario": "stress"},
+                 tag="stress")
+    assert result["mismatches"] == 0 and result["ok"] and result["samples"] >= 120
+
+
 @pytest.mark.parametrize("variant", ["steady", "full"])
 def test_system_six_channels(simulator, variant, seed):
     samples = 30000 if simulator == "verilator" else 3000
