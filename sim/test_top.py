@@ -135,3 +135,34 @@ async def glitch_sample(dut):
     await run_to(tb, 40)
     report = finish(tb, p, t0, glitches=len(tb.source.glitches))
     assert tb.source.glitches and report["ok"], report
+
+
+@cocotb.test(**deadline(20, default_samples=10))
+async def reset_release_latency(dut):
+    """rst_n released at each of the ten system cycles of an ADC clock period: the first action
+    (RESET low to the ADC) comes 3 to 12 system cycles after the first clock edge that sees
+    rst_n high: the reset synchroniser's two stages and the control word's register, then up to
+    one strobe period more; each phase one cycle apart."""
+    from cocotb.clock import Clock
+
+    from kfpga.board import SYSTEM_PERIOD_NS
+
+    p = sim_params()
+    dut.rst_n.value = 0
+    dut.adc_eoc_n.value = 1
+    Clock(dut.clk50, SYSTEM_PERIOD_NS, unit="ns").start()
+    ratio = int(p.get("ratio", 10))
+    delays = []
+    for phase in range(ratio):
+        dut.rst_n.value = 0
+        await ClockCycles(dut.clk50, 3 * ratio)
+        await RisingEdge(dut.adc_clk)
+        await ClockCycles(dut.clk50, phase)
+        await Timer(1, "ns")  # between clock edges, as an asynchronous reset comes
+        dut.rst_n.value = 1
+        await RisingEdge(dut.clk50)  # the first edge that sees it high
+        seen = get_sim_time("ns")
+        await with_timeout(FallingEdge(dut.adc_reset_n), 20 * ratio * SYSTEM_PERIOD_NS, "ns")
+        delays.append(round((get_sim_time("ns") - seen) / SYSTEM_PERIOD_NS, 3))
+    write_results(p, {"delays_cycles": delays})
+    assert sorted(delays) == [float(3 + k) for k in range(ratio)], delays

@@ -206,6 +206,14 @@ def test_system_stress_codes_and_pins(simulator, seed):
     assert result["mismatches"] == 0 and result["ok"] and result["samples"] >= 120
 
 
+def test_reset_release_latency(simulator):
+    """rst_n released at every phase of the ADC clock: the first action 3..12 cycles after the
+    first edge that sees it, one cycle apart (the synchroniser's stages, on the right edge)."""
+    result = run(build(simulator, "top", variant="steady", channel=1), "test_top", testcase="reset_release_latency",
+                 params={"variant": "steady", "seed": 1, "channel": 1}, tag="reset-latency")
+    assert sorted(result["delays_cycles"]) == [float(3 + k) for k in range(10)]
+
+
 @pytest.mark.parametrize("variant", ["steady", "full"])
 def test_system_six_channels(simulator, variant, seed):
     samples = 30000 if simulator == "verilator" else 3000
