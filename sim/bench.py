@@ -191,6 +191,7 @@ class SystemTB(SystemRecords):
                                     int(self.dut.adc_wr_n.value)))
 
     async def _monitor(self):
+        self.valid_high_ns = []
         rising = RisingEdge(self.dut.out_valid)
         falling = FallingEdge(self.dut.out_valid)
         step = max(self.params.get("samples", 1) // 100, 1)
@@ -204,7 +205,9 @@ class SystemTB(SystemRecords):
                 self.progress_file.write_text(str(n))
             if n >= self._want:
                 self._enough.set()
+            risen = self.outputs[-1][0]
             await falling
+            self.valid_high_ns.append(now_ns() - risen)  # a one-cycle strobe per estimate
 
     async def wait_outputs(self, count):
         """Run until ``count`` estimates have come out."""

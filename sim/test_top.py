@@ -77,6 +77,10 @@ def check_pins(dut, tb, p):
             assert all(abs(w - 1000 * PERIOD_US) < 1.0 for w in widths), f"HOLD{'ABC'[pair]} low for {sorted(set(widths))} ns"
         else:
             assert not widths, f"HOLD{'ABC'[pair]} pulsed, but this design converts with HOLD{'ABC'[min(used)]}"
+    from kfpga.board import SYSTEM_PERIOD_NS
+
+    widths = sorted({round(w, 3) for w in tb.valid_high_ns})
+    assert widths == [round(SYSTEM_PERIOD_NS, 3)], f"out_valid high for {widths} ns, not one system cycle"
     assert tb.pin_levels and all(levels == (0, 0, 1) for levels in tb.pin_levels), \
         f"BYTE, ADD, WR not held at 0, 0, 1: {sorted(set(tb.pin_levels))}"
 
