@@ -24,7 +24,7 @@ from kfpga.hw.layouts import channel_bits, input_layout, output_layout
 from kfpga.hw.storage import MAX_REGISTER_CHANNELS, StateMemory, at, check_channels, select, state_array
 from kfpga.ops import Fx
 
-__all__ = ["Core", "LoopPipeline", "write_estimate"]
+__all__ = ["Core", "LoopPipeline", "write_estimate", "register_stage"]
 
 
 def write_estimate(m, core, channel, outputs, flags):
@@ -36,6 +36,27 @@ def write_estimate(m, core, channel, outputs, flags):
     """
     m.d.sync += [core.o.payload.channel.eq(channel), core.o_flags.eq(Cat(*flags))]
     m.d.sync += [getattr(core.o.payload, name).eq(value.raw) for name, value in outputs.items()]
+
+
+def register_stage(m, advance, tag, valid, channel, flags, live):
+    """A pipeline register stage, loaded when ``advance``: every live value (an
+    :class:`~kfpga.ops.Fx` keeps its binary point; a condition stays one bit), the valid bit, the
+    channel and the flags so far. Returns ``(valid, channel, flags, live)`` of the registers."""
+    r_valid, r_flags = Signal(name=f"r{tag}_valid"), Signal(name=f"r{tag}_flags")
+    r_channel = Signal.like(channel, name=f"r{tag}_channel")
+    held = {}
+    with m.If(advance):
+        m.d.sync += [r_valid.eq(valid), r_channel.eq(channel), r_flags.eq(flags)]
+        for key, value in live.items():
+            if isinstance(value, Fx):
+                reg = Signal(signed(len(value.raw)), name=f"r{tag}_{key}")
+                m.d.sync += reg.eq(value.raw)
+                held[key] = Fx(reg, value.frac, value.const, value.fmt, str(key))
+            else:
+                reg = Signal(name=f"r{tag}_{key}")
+                m.d.sync += reg.eq(value)
+                held[key] = reg
+    return r_valid, r_channel, r_flags, held
 
 
 class Core(wiring.Component):
@@ -201,7 +222,7 @@ class LoopPipeline(Core):
             flags = flags | ops.overflow()
             later = set().union(*self.reads[self.steps.index(group[-1]) + 1:], self.carry) - reread
             live = {name: value for name, value in live.items() if name in later}
-            valid, channel, flags, live = self._register(m, advance, n, valid, channel, flags, live)
+            valid, channel, flags, live = register_stage(m, advance, n, valid, channel, flags, live)
             in_flight.append((valid, channel))
         # write-back at the end of the last loop stage
         if in_memory:
@@ -227,7 +248,7 @@ class LoopPipeline(Core):
             pending += [flag for _, flag in ops.flags]
             if n < len(steps):
                 combined = reduce(lambda a, b: a | b, pending, Const(0, 1))
-                valid, channel, flags, out = self._register(m, advance, f"o{n}", valid, channel, combined, out)
+                valid, channel, flags, out = register_stage(m, advance, f"o{n}", valid, channel, combined, out)
                 pending = [flags]
         self.flag_outputs(m, len(pending))
         with m.If(advance):
@@ -236,16 +257,3 @@ class LoopPipeline(Core):
                 write_estimate(m, self, channel, self.final(out), pending)
         return m
 
-    @staticmethod
-    def _register(m, advance, tag, valid, channel, flags, live):
-        """A register stage: every live value, the valid bit, the channel and the flags so far."""
-        r_valid, r_flags = Signal(name=f"r{tag}_valid"), Signal(name=f"r{tag}_flags")
-        r_channel = Signal.like(channel, name=f"r{tag}_channel")
-        held = {}
-        with m.If(advance):
-            m.d.sync += [r_valid.eq(valid), r_channel.eq(channel), r_flags.eq(flags)]
-            for name, value in live.items():
-                reg = Signal(signed(len(value.raw)), name=f"r{tag}_{name}")
-                m.d.sync += reg.eq(value.raw)
-                held[name] = Fx(reg, value.frac, value.const, value.fmt, name)
-        return r_valid, r_channel, r_flags, held

@@ -25,11 +25,11 @@ from __future__ import annotations
 
 from functools import reduce
 
-from amaranth import Cat, Const, Module, Signal, signed
+from amaranth import Const, Module, Signal
 
 from kfpga.ads8364 import CODE_FORMAT
 from kfpga.hw.arith import AmaranthOps
-from kfpga.hw.core import Core
+from kfpga.hw.core import Core, register_stage, write_estimate
 from kfpga.hw.storage import at, check_channels
 from kfpga.model import tukey53h as eq
 from kfpga.ops import Fx
@@ -144,34 +144,15 @@ class Tukey53HCore(Core):
                 pending += flags
                 break
             combined = reduce(lambda a, b: a | b, [*pending, *flags], Const(0, 1))
-            valid, channel, live, pending = self._register(m, advance, n, valid, channel, combined, live)
+            valid, channel, flags, live = register_stage(m, advance, n, valid, channel, combined, live)
+            pending = [flags]
             in_range = channel < self.channels if 1 < self.channels < 2 ** len(channel) else Const(1, 1)
         self.flag_outputs(m, len(pending))
         with m.If(advance):
             m.d.sync += self.o.valid.eq(valid)
             with m.If(valid):
-                m.d.sync += [self.o.payload.channel.eq(channel), self.o.payload.y.eq(live["y"].raw),
-                             self.o_flags.eq(Cat(*pending))]
+                write_estimate(m, self, channel, live, pending)
         return m
-
-    @staticmethod
-    def _register(m, advance, n, valid, channel, flags, live):
-        """A register stage: the live values (a 1-bit condition stays 1 bit), valid, channel, flags."""
-        r_valid, r_flags = Signal(name=f"r{n}_valid"), Signal(name=f"r{n}_flags")
-        r_channel = Signal.like(channel, name=f"r{n}_channel")
-        held = {}
-        with m.If(advance):
-            m.d.sync += [r_valid.eq(valid), r_channel.eq(channel), r_flags.eq(flags)]
-            for key, value in live.items():
-                if isinstance(value, Fx):
-                    reg = Signal(signed(len(value.raw)), name=f"r{n}_{key}")
-                    m.d.sync += reg.eq(value.raw)
-                    held[key] = Fx(reg, value.frac, value.const, value.fmt, str(key))
-                else:  # a condition
-                    reg = Signal(name=f"r{n}_{key}")
-                    m.d.sync += reg.eq(value)
-                    held[key] = reg
-        return r_valid, r_channel, held, [r_flags]
 
 
 def make_core(config, variant="online", *, channels=1):
