@@ -221,7 +221,8 @@ def sweep(params, variant, y, truth, widths, *, settle=None, range_source="scena
     return rows, narrowest
 
 
-def _pyplot():
+def pyplot():
+    """matplotlib's pyplot on the Agg backend (files, no display)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -232,7 +233,7 @@ def _pyplot():
 
 def plot_compare(cmp_, path, title=""):
     """Overview, a zoomed window, the estimation errors and the fixed - float difference."""
-    plt = _pyplot()
+    plt = pyplot()
     n = len(cmp_.fixed_out)
     k = np.arange(n)
     raw = cmp_.y  # None when no input observes the plotted output itself
@@ -287,7 +288,7 @@ def plot_sweep(rows, narrowest, path, title="", budget=0.01):
     width of one embedded multiplier marked."""
     from kfpga.formats import MULTIPLIER_BITS
 
-    plt = _pyplot()
+    plt = pyplot()
     bits = [r["bits"] for r in rows]
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 7), sharex=True, constrained_layout=True)
     flt = np.array([r["rmse_float"] for r in rows])

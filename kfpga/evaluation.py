@@ -191,10 +191,9 @@ def alpha_beta_findings(result):
 
 def alpha_beta_plot(result, path):
     """The paper's figures: the tracks (truth, plots, filtered), and the position error against time."""
-    import matplotlib
+    from kfpga.analysis import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     truth, plots, series = result["truth"], result["plots"], result["series"]
     fig, (a, b) = plt.subplots(1, 2, figsize=(13, 5.5))
@@ -479,10 +478,9 @@ def tukey53h_findings(result):
 
 def tukey53h_plot(result, path):
     """The paper's figs. 5-6: east and north velocity before and after each method."""
-    import matplotlib
+    from kfpga.analysis import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     names = ["east velocity", "north velocity"]
     fig, axes = plt.subplots(len(names), 1, figsize=(13, 8), sharex=True)
@@ -602,10 +600,9 @@ def _fading_finding(result):
 
 def roll_plot(result, path):
     """The paper's figs. 4-5: the roll and its predictions, and the prediction errors."""
-    import matplotlib
+    from kfpga.analysis import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     data = next(d for d in result["series"] if not d.startswith("table"))
     s = result["series"][data]
@@ -759,10 +756,9 @@ def ls_frontend_findings(result):
 
 def ls_frontend_plot(result, path):
     """The patent's fig. 4: the velocity estimates through the deceleration, and their errors."""
-    import matplotlib
+    from kfpga.analysis import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     s = result["series"]
     t = s["t"]
