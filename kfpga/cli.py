@@ -1067,6 +1067,21 @@ def _run_testbench(args):
 # -- evaluate --------------------------------------------------------------------------------
 
 
+def _report_evaluation(args, plot, result, name, keys):
+    """The end of every ``kfpga evaluate``: the plot if asked for, then the table, or JSON of
+    ``keys`` with the findings; ``name`` picks ``evaluation.<name>_plot|_table|_findings``."""
+    from kfpga import evaluation
+
+    if plot:
+        getattr(evaluation, f"{name}_plot")(result, plot)
+        _info(f"plot: {plot}")
+    if args.json:
+        _emit_json({k: result[k] for k in keys} | {"findings": getattr(evaluation, f"{name}_findings")(result)})
+    else:
+        print(getattr(evaluation, f"{name}_table")(result))
+    return 0
+
+
 def _run_evaluate_alpha_beta(args):
     from kfpga import evaluation
 
@@ -1076,15 +1091,7 @@ def _run_evaluate_alpha_beta(args):
     seed = _pick_seed(args.seed)
     _info(f"seed {seed}")
     result = evaluation.alpha_beta(evaluation.AlphaBetaScenario(targets=args.targets), seed=seed)
-    if plot:
-        evaluation.alpha_beta_plot(result, plot)
-        _info(f"plot: {plot}")
-    if args.json:
-        _emit_json({k: result[k] for k in ("seed", "scenario", "rows", "costs")}
-                   | {"findings": evaluation.alpha_beta_findings(result)})
-    else:
-        print(evaluation.alpha_beta_table(result))
-    return 0
+    return _report_evaluation(args, plot, result, "alpha_beta", ("seed", "scenario", "rows", "costs"))
 
 
 def _run_evaluate_53h(args):
@@ -1094,15 +1101,7 @@ def _run_evaluate_53h(args):
     seed = _pick_seed(args.seed)
     _info(f"seed {seed}")
     result = evaluation.tukey53h(seed=seed)
-    if plot:
-        evaluation.tukey53h_plot(result, plot)
-        _info(f"plot: {plot}")
-    if args.json:
-        _emit_json({k: result[k] for k in ("seed", "scenario", "rows", "limits", "comparators")}
-                   | {"findings": evaluation.tukey53h_findings(result)})
-    else:
-        print(evaluation.tukey53h_table(result))
-    return 0
+    return _report_evaluation(args, plot, result, "tukey53h", ("seed", "scenario", "rows", "limits", "comparators"))
 
 
 def _run_evaluate_roll(args):
@@ -1134,14 +1133,7 @@ def _run_evaluate_roll(args):
         seed = _pick_seed(args.seed)
         _info(f"seed {seed}")
     result = evaluation.roll(seed=seed, samples=samples, series=series, params=params)
-    if plot:
-        evaluation.roll_plot(result, plot)
-        _info(f"plot: {plot}")
-    if args.json:
-        _emit_json({k: result[k] for k in ("seed", "params", "rows", "sweep")} | {"findings": evaluation.roll_findings(result)})
-    else:
-        print(evaluation.roll_table(result))
-    return 0
+    return _report_evaluation(args, plot, result, "roll", ("seed", "params", "rows", "sweep"))
 
 
 def _run_evaluate_ls_frontend(args):
@@ -1151,15 +1143,7 @@ def _run_evaluate_ls_frontend(args):
     seed = _pick_seed(args.seed)
     _info(f"seed {seed}")
     result = evaluation.ls_frontend(seed=seed)
-    if plot:
-        evaluation.ls_frontend_plot(result, plot)
-        _info(f"plot: {plot}")
-    if args.json:
-        _emit_json({k: result[k] for k in ("seed", "scenario", "params", "rows", "windows")}
-                   | {"findings": evaluation.ls_frontend_findings(result)})
-    else:
-        print(evaluation.ls_frontend_table(result))
-    return 0
+    return _report_evaluation(args, plot, result, "ls_frontend", ("seed", "scenario", "params", "rows", "windows"))
 
 
 # -- filters ---------------------------------------------------------------------------------
