@@ -127,6 +127,18 @@ def updates_of(reads, config, adc):
     return out
 
 
+def _settled(channels):
+    """``(mask, settle)``: the estimates past each channel's first ``settle`` (each channel
+    settles on its own from reset: skipping the first samples of the interleaved stream would
+    leave five channels' starts in the figures)."""
+    rank = np.zeros(len(channels), dtype=int)
+    for ch in np.unique(channels):
+        idx = np.flatnonzero(channels == ch)
+        rank[idx] = np.arange(len(idx))
+    settle = min(100, int(np.min(np.bincount(channels)[np.unique(channels)])) // 10)
+    return rank >= settle, settle
+
+
 class SystemRecords:
     """What a whole-design run produced: the reads the ADC served, the estimates on the output
     port, the resets; checked against the model by :meth:`report`.
@@ -180,22 +192,21 @@ class SystemRecords:
             "max_abs_hw_minus_float_lsb": float(np.max(np.abs(hw - flt)) / fmt.lsb),
             "sqnr_db": sqnr_db(flt, hw),
         }
-        truth = getattr(self.source, "truth", None)
-        if truth is not None:
-            late = 4 if self.prefilter is not None else 0  # the pre-filter passes each sample on 4 later
-            k = np.maximum(np.array([r.conversion for r in reads]) - late, 0) % truth.shape[1]
-            t = truth[channels, k]
-            # each channel settles on its own: skip the first samples of every channel, not of the
-            # interleaved stream (which would leave five channels' starts in the figures)
-            rank = np.zeros(n, dtype=int)
-            for ch in np.unique(channels):
-                idx = np.flatnonzero(channels == ch)
-                rank[idx] = np.arange(len(idx))
-            settle = min(100, int(np.min(np.bincount(channels)[np.unique(channels)])) // 10)
-            w = rank >= settle
+        t = self._truth_of(reads, channels)
+        if t is not None:
+            w, settle = _settled(channels)
             out.update({"rmse_raw": rmse(raw[w], t[w]) if raw is not None else None, "rmse_float": rmse(flt[w], t[w]),
                         "rmse_hw": rmse(hw[w], t[w]), "settle_per_channel": settle})
         return out
+
+    def _truth_of(self, reads, channels):
+        """The truth of each estimate of ``reads`` (``None`` for a source without one): its
+        conversion's, 4 conversions before with the pre-filter, which passes each sample on 4 later."""
+        truth = getattr(self.source, "truth", None)
+        if truth is None:
+            return None
+        late = 4 if self.prefilter is not None else 0
+        return truth[channels, np.maximum(np.array([r.conversion for r in reads]) - late, 0) % truth.shape[1]]
 
     def glitch_figures(self):
         """The injected ADC glitches of a one-input filter's run, counted where they go: in the
@@ -224,20 +235,12 @@ class SystemRecords:
                 # word j of a channel decides its read j - 4
                 left += int(np.sum(np.abs(words[idx][DELAY:] - clean[idx][:-DELAY]) > bound)) if len(idx) > DELAY else 0
             out["glitches_after_prefilter"] = left
-        truth = getattr(self.source, "truth", None)
-        if truth is not None:
+        t = self._truth_of(reads, channels)
+        if t is not None:
             fmt = self.config.output_format(self.field)
             hw = fmt.to_float([o[2] for o in self.outputs[:n]])
-            late = DELAY if self.prefilter is not None else 0
-            k = np.maximum(np.array([r.conversion for r in reads]) - late, 0) % truth.shape[1]
-            # each channel's first estimates settle from the reset state: skipped, as for the RMSE
-            rank = np.zeros(n, dtype=int)
-            for ch in np.unique(channels):
-                idx = np.flatnonzero(channels == ch)
-                rank[idx] = np.arange(len(idx))
-            settle = min(100, int(np.min(np.bincount(channels)[np.unique(channels)])) // 10)
-            off = (np.abs(hw - truth[channels, k]) > bound) & (rank >= settle)
-            out["estimates_off_by_more_than_bound"] = int(np.sum(off))
+            settled, _ = _settled(channels)
+            out["estimates_off_by_more_than_bound"] = int(np.sum((np.abs(hw - t) > bound) & settled))
         return out
 
     def report(self, wall_s, *, timeout_flag, overflow_flag, sim_time_us, pending_allowed=2):
