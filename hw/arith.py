@@ -131,6 +131,9 @@ class AmaranthOps(Ops):
             f"{name}: a division is sequential; the core instantiates hw/divider.Divider and feeds it "
             "with divider_operands()")
 
+    def _sqrt(self, raw, shift, fmt, name):
+        raise NotImplementedError(f"{name}: a square root is sequential; the core instantiates its square-root unit")
+
     def _any(self, flags):
         flag = Signal(name=f"{self.prefix}overflow_any")
         self.m.d.comb += flag.eq(reduce(lambda a, b: a | b, flags, Const(0, 1)))

@@ -22,13 +22,14 @@ at trace time.
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 
 import numpy as np
 
 from kfpga.fixed import Overflow, Rounding, shift_round
-from kfpga.ops import Fx, Ops, divide, quotient_bits
+from kfpga.ops import Fx, Ops, divide, quotient_bits, square_root
 
 __all__ = ["TraceOps", "FloatTraceOps", "Kernel", "compile_stage", "compile_float_ranges"]
 
@@ -173,6 +174,23 @@ class TraceOps(Ops):
         ]
         return q, "site"
 
+    def _sqrt(self, raw, shift, fmt, name):
+        limit = fmt.max_raw
+        site = self._site(name)
+        r = self._var("0", 0, limit)
+        if self.vector:
+            self.lines.append(f"{r.expr}, f{site} = square_root({raw.expr}, {shift}, {limit})")
+            self.lines.append(f"ov{site}[n] = f{site}")
+            return r, f"f{site}"
+        v = raw.expr
+        radicand = f"{v} << {shift}" if shift >= 0 else f"{v} >> {-shift}"
+        self.lines += [
+            f"if {v} < 0: {r.expr} = 0; ov{site}(n)",
+            f"else: {r.expr} = isqrt({radicand})",
+            f"if {r.expr} > {limit}: {r.expr} = {limit}; ov{site}(n)",
+        ]
+        return r, "site"
+
 
 _COPY = re.compile(r"^(t\d+) = (t\d+)$")
 
@@ -249,7 +267,7 @@ def compile_stage(update, formats, *, constants, state, inputs, outputs, vector)
     lines = [f"def kernel({', '.join(args)}):", *[f"    {h}" for h in head], *[f"    {b}" for b in body],
              f"    return ({''.join('s_' + n + ', ' for n in state_names)})"]
     source = "\n".join(lines) + "\n"
-    namespace = {"np": np, "divide": divide}
+    namespace = {"np": np, "divide": divide, "square_root": square_root, "isqrt": math.isqrt}
     exec(compile(source, f"<kfpga stage {update.__name__}>", "exec"), namespace)
     return Kernel(source, namespace["kernel"], state_names, input_names, tuple(outputs), sites,
                   {name: ops.point_of[name] for name in sites})
@@ -296,6 +314,10 @@ class FloatTraceOps(TraceOps):
         q = self._var(f"{num.raw.expr} / {den.raw.expr}", 0, 0)
         return self.rq(Fx(q, 0), point, name)
 
+    def sqrt(self, a, point, name=None):
+        r = self._var(f"sqrt(max({a.raw.expr}, 0.0))", 0, 0)
+        return self.rq(Fx(r, 0), point, name)
+
 
 def compile_float_ranges(update, *, constants, state, inputs):
     """Compile ``update`` in float for range analysis.
@@ -317,7 +339,7 @@ def compile_float_ranges(update, *, constants, state, inputs):
              *[f"    m{i} = 0.0" for i in sites], f"    {loop}", *[f"        {line}" for line in ops.lines],
              f"        {', '.join('s_' + n for n in state_names)}, = {', '.join(x_next[n].raw.expr for n in state_names)},",
              f"    return ({', '.join(f'm{i}' for i in sites)},)"]
-    namespace = {}
+    namespace = {"sqrt": math.sqrt}
     exec(compile("\n".join(lines) + "\n", f"<kfpga float stage {update.__name__}>", "exec"), namespace)
     kernel = namespace["kernel"]
 

@@ -10,7 +10,8 @@ for ``raw * 2**-frac``). ``add``, ``sub``, ``neg``, ``mul``, ``shift``, ``abs``,
 ``max`` and ``sort2`` (a compare-exchange) are exact, ``gt`` gives a condition; ``rq``
 writes a value into the format of a quantisation point (the one place where bits are dropped,
 with the point's rounding and overflow rules, raising an overflow flag); ``div`` is the
-restoring divider of the time-varying filters. The rules every backend shares live here, in
+restoring divider of the time-varying filters and ``sqrt`` the restoring square root of the
+square-root covariance forms. The rules every backend shares live here, in
 :class:`Ops`, once:
 
 * a sum is aligned to the larger fraction count of its terms (the other term shifted left);
@@ -42,7 +43,7 @@ import numpy as np
 from kfpga.fixed import INT64_SAFE_BITS, Overflow, QFormat, Rounding, requantize, to_raw
 
 __all__ = ["Fx", "Ops", "IntOps", "FloatOps", "WidthOps", "FractionOps", "CostOps", "update_cost", "Intermediate", "divider_shift",
-           "quantise_fraction", "quotient_bits", "divide"]
+           "quantise_fraction", "quotient_bits", "divide", "root_shift", "square_root"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -64,6 +65,12 @@ class Fx:
 def divider_shift(num_frac, den_frac, quotient_frac):
     """Left shift of the dividend so that ``floor(|num| << shift / den)`` has ``quotient_frac`` bits."""
     return quotient_frac + den_frac - num_frac
+
+
+def root_shift(frac, root_frac):
+    """Left shift (negative: floor right shift) of a radicand with ``frac`` fraction bits so that
+    its integer square root has ``root_frac`` fraction bits."""
+    return 2 * root_frac - frac
 
 
 def quotient_bits(fmt):
@@ -234,6 +241,17 @@ class Ops:
         self.flags.append((name, flag))
         return Fx(raw, fmt.frac_bits, None, fmt, name)
 
+    def sqrt(self, a, point, name=None):
+        """The restoring square root: ``sqrt(a)`` truncated to the fraction bits of ``point`` (the
+        floor of the exact root; like :meth:`div`, the point's rounding rule does not apply),
+        saturated to its largest value when it does not fit; 0 and the flag for ``a < 0``."""
+        fmt = self.fmt(point)
+        name = name or _label(point)
+        self.point_of[name] = point if isinstance(point, str) else str(point)
+        raw, flag = self._sqrt(a.raw, root_shift(a.frac, fmt.frac_bits), fmt, name)
+        self.flags.append((name, flag))
+        return Fx(raw, fmt.frac_bits, None, fmt, name)
+
     def overflow(self):
         """OR of every flag raised so far."""
         return self._any([f for _, f in self.flags])
@@ -284,6 +302,9 @@ class Ops:
     def _div(self, num, den, shift, fmt, name):
         raise NotImplementedError
 
+    def _sqrt(self, raw, shift, fmt, name):
+        raise NotImplementedError
+
     def _any(self, flags):
         out = False
         for f in flags:
@@ -329,6 +350,29 @@ def divide(num, den, shift, quotient_bits):
     return (-quo if num < 0 else quo), bad
 
 
+def square_root(raw, shift, limit):
+    """The restoring square root on integers: ``(root, flag)``; ints or int64 arrays.
+
+    ``floor(sqrt(raw * 2**shift))`` (a negative ``shift`` drops bits first, by a floor shift:
+    the floor of the root of a floor is the floor of the root); ``limit`` and the flag when the
+    root is above ``limit``; 0 and the flag for a negative ``raw``.
+    """
+    if isinstance(raw, np.ndarray):
+        raw = np.asarray(raw, dtype=np.int64)
+        rad = np.maximum(raw, 0)
+        rad = rad << shift if shift >= 0 else rad >> -shift
+        # float64's root of an integer below 2**62 is within one of the integer root: correct it
+        root = np.floor(np.sqrt(rad.astype(np.float64))).astype(np.int64)
+        root = np.where(root * root > rad, root - 1, root)
+        root = np.where((root + 1) * (root + 1) <= rad, root + 1, root)
+        bad = (raw < 0) | (root > limit)
+        return np.where(raw < 0, 0, np.minimum(root, limit)), bad
+    if raw < 0:
+        return 0, True
+    root = math.isqrt(raw << shift if shift >= 0 else raw >> -shift)
+    return (limit, True) if root > limit else (root, False)
+
+
 class IntOps(Ops):
     """The bit-accurate integers: payloads are Python ints (one channel) or int64 arrays (a batch).
 
@@ -342,6 +386,9 @@ class IntOps(Ops):
 
     def _div(self, num, den, shift, fmt, name):
         return divide(num, den, shift, quotient_bits(fmt))
+
+    def _sqrt(self, raw, shift, fmt, name):
+        return square_root(raw, shift, fmt.max_raw)
 
 
 # -- float: the real-valued filter and its ranges ----------------------------------------------
@@ -382,6 +429,9 @@ class FloatOps(Ops):
     def div(self, num, den, point, name=None):
         return self.rq(Fx(num.raw / den.raw, 0), point, name)
 
+    def sqrt(self, a, point, name=None):
+        return self.rq(Fx(np.sqrt(np.maximum(a.raw, 0.0)), 0), point, name)
+
     def _zero(self):
         return 0.0
 
@@ -407,7 +457,7 @@ class Intermediate:
     text: str  # the expression, in point and constant names
     width: int  # signed width in bits (Amaranth's rules: a + b is one bit wider, a * b the sum)
     points: frozenset  # quantisation points whose formats set it
-    kind: str  # "sum", "product", "shift", "dividend", "comparison"
+    kind: str  # "sum", "product", "shift", "dividend", "radicand", "comparison"
     into: str | None = None  # the point it is written to, when known
 
 
@@ -528,6 +578,12 @@ class WidthOps(Ops):
         self._node(den.width + qbits, f"{den.text} << {qbits}", points, "comparison")
         return _W(fmt.width, name, frozenset([name])), False
 
+    def _sqrt(self, raw, shift, fmt, name):
+        # the radicand, shifted; the restoring root compares it with the root so far
+        self._node(raw.width + max(shift, 0), f"{raw.text} << {shift}" if shift >= 0 else f"{raw.text} >> {-shift}",
+                   raw.points | {name}, "radicand")
+        return _W(fmt.width, name, frozenset([name])), False
+
     def overflow(self):
         return False
 
@@ -547,6 +603,7 @@ class CostOps(Ops):
       constant other than 0, +-1, +-2**k);
     * ``shifts``: products by 0, +-1 or +-2**k (wiring, no multiplier);
     * ``divisions``: the restoring divider;
+    * ``square roots``: the restoring square root;
     * ``comparisons``: magnitude comparators (a compare-exchange of a sorting network is one,
       whose two outputs are multiplexers);
     * ``selections``: multiplexers between two values.
@@ -556,8 +613,8 @@ class CostOps(Ops):
 
     def __init__(self, formats):
         super().__init__(formats)
-        self.counts = {"additions": 0, "multiplications": 0, "shifts": 0, "divisions": 0, "comparisons": 0,
-                       "selections": 0}
+        self.counts = {"additions": 0, "multiplications": 0, "shifts": 0, "divisions": 0, "square roots": 0,
+                       "comparisons": 0, "selections": 0}
 
     def mul(self, a, b):
         c = a.const if b.const is None else b.const
@@ -614,6 +671,10 @@ class CostOps(Ops):
 
     def _div(self, num, den, shift, fmt, name):
         self.counts["divisions"] += 1
+        return 0, False
+
+    def _sqrt(self, raw, shift, fmt, name):
+        self.counts["square roots"] += 1
         return 0, False
 
 
@@ -696,6 +757,21 @@ class FractionOps(Ops):
             return Fraction(limit if num >= 0 else -limit, 1 << fmt.frac_bits), True
         quo = math.floor(exact)
         return Fraction(-quo if num < 0 else quo, 1 << fmt.frac_bits), False
+
+    def _sqrt(self, value, shift, fmt, name):
+        if value < 0:
+            return Fraction(0), True
+        # the largest r with r^2 <= value * 4**frac, by bisection on exact rationals (no isqrt)
+        target = value * (1 << (2 * fmt.frac_bits))
+        lo, hi = 0, 1
+        while hi * hi <= target:
+            hi *= 2
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            lo, hi = (mid, hi) if mid * mid <= target else (lo, mid)
+        if lo > fmt.max_raw:
+            return Fraction(fmt.max_raw, 1 << fmt.frac_bits), True
+        return Fraction(lo, 1 << fmt.frac_bits), False
 
     def raw_of(self, a):
         """The integer a value stands for in its format (``a`` must come from ``rq``/``div``)."""
