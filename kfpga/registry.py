@@ -16,6 +16,7 @@ FILTERS = {
     "kalman": "kfpga.model.kalman",
     "alpha-beta": "kfpga.model.alphabeta",
     "53h": "kfpga.model.tukey53h",
+    "roll": "kfpga.model.roll",
 }
 #: The paper's filter, used when a config or command names none.
 DEFAULT = "kalman2"

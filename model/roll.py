@@ -30,14 +30,19 @@ with q > 0. So the paper's P0 is used as printed (the default, :data:`PAPER_P0`)
 from __future__ import annotations
 
 import csv
+import math
 from dataclasses import dataclass
 from importlib import resources
 
 import numpy as np
 
+from kfpga.fixed import QFormat
+from kfpga.formats import MAX_OPERAND_BITS
 from kfpga.params import matrix, number
+from kfpga.spec import Constant, FilterSpec, Output, Point, Variant
 
-__all__ = ["RollParams", "PAPER_P0", "transition", "predict", "table1", "synthetic_roll", "MIN_SAMPLES"]
+__all__ = ["RollParams", "PAPER_P0", "transition", "predict", "table1", "synthetic_roll", "MIN_SAMPLES", "SPEC",
+           "sqrt_update", "plain_update", "unit_matrices", "reference"]
 
 #: The paper's P0 (its equation 23): all entries 10, rank 1.
 PAPER_P0 = ((10.0, 10.0, 10.0), (10.0, 10.0, 10.0), (10.0, 10.0, 10.0))
@@ -62,6 +67,9 @@ class RollParams:
     P0:
         Covariance at each filter's start (default: the paper's all-10s matrix; symmetric and
         positive semi-definite).
+    lsb:
+        Degrees per ADC code of the roll sensor, > 0 (the bit-accurate filter and its core work
+        in codes; default 0.01 deg, the resolution of the paper's table 1: +-327 deg full scale).
     """
 
     T: float = 0.5
@@ -69,9 +77,10 @@ class RollParams:
     R: float = 0.01
     s: float = 100.0
     P0: tuple = PAPER_P0
+    lsb: float = 0.01
 
     def __post_init__(self):
-        for name in ("T", "q", "R", "s"):
+        for name in ("T", "q", "R", "s", "lsb"):
             object.__setattr__(self, name, number(name, getattr(self, name), minimum=0.0, strict=True))
         p0 = matrix("P0", self.P0, 3, 3, symmetric=True)
         if np.min(np.linalg.eigvalsh(np.array(p0))) < -1e-12:
@@ -200,3 +209,307 @@ def synthetic_roll(n=480, seed=1, *, T=0.5, noise=0.02):
         envelope = 1.0 + 0.3 * np.sin(2 * np.pi * t / rng.uniform(60, 120) + rng.uniform(0, 2 * np.pi))
         clean += amp * envelope * np.sin(2 * np.pi * t / period + rng.uniform(0, 2 * np.pi))
     return t, clean + rng.normal(0, noise, n), clean
+
+
+# -- the bit-accurate predictor: one filter of the pair, in ADC codes ------------------------------------------
+#
+# One registered filter is one of the two: it takes every other sample (the core's two channels
+# are the pair, fed alternately), and after each sample gives its prediction of its next one.
+# The state is in codes and per filter step (tau = 2 T): x1 the angle, x2 the rate times tau,
+# x3 the acceleration times tau^2, so the transition is A = [[1, 1, 1/2], [0, 1, 1], [0, 0, 1]]
+# whatever T is (its products are shifts), and the noises are Q = q diag(1, tau^2, tau^4) / lsb^2,
+# R / lsb^2. Each filter starts from x = 0 and the prediction covariance A P0 A^T + Q (the paper's
+# P0 is used as printed, see above): its first samples set the state.
+#
+# ``sqrt`` (the hardware's): the covariance as its lower-triangular square root D (P- = D D^T),
+# six registers. Potter's measurement update with H = [1 0 0] changes only D's first column:
+#     S = d11^2 + R     K = d11 D[:, 0] / S     D[:, 0] = sqrt(R / S) D[:, 0]     x = x + K e
+# (the paper's eqs. 19-20 with M = D^T H^T = (d11, 0, 0): its O K M^T is the column times
+# 1 - sqrt(R/S)). The time update never forms P: the 3 x 6 matrix [sqrt(s) A D, sqrt(Q)] is
+# brought to lower-triangular form [D-, 0] by Givens rotations, each ``r = sqrt(a^2 + b^2)``,
+# ``c = a / r``, ``s = b / r`` on one restoring square root and two divisions; then
+# D- D-^T = s A D D^T A^T + Q exactly in real arithmetic. Rows 1 and 2 take three rotations each
+# (the zeros of sqrt(Q) need none); the last row's diagonal is the norm of what is left of it.
+# A square root is the floor of the exact root (``Ops.sqrt``), a quotient truncated toward zero,
+# every other write rounded by its point's rule.
+#
+# ``plain``: the same order and fading with P itself (six registers, symmetric):
+#     S = p11 + R   K = P[:, 0] / S   P = P - K P[0, :]   x = x + K e
+#     x- = A x      P- = s [A P A^T] + Q
+# model only: it is the yardstick of the word-length sweep (``pd_sweep``).
+
+#: The transition over one filter step in its own units (rows of (coefficient, column)).
+_A = (((1.0, 0), (1.0, 1), (0.5, 2)), ((1.0, 1), (1.0, 2)), ((1.0, 2),))
+
+
+def _units(params):
+    """``(tau, S)``: the filter step and the scaling of (angle, rate, acceleration) into codes per step."""
+    tau = 2.0 * params.T
+    return tau, np.diag([1.0, tau, tau * tau]) / params.lsb
+
+
+def unit_matrices(params):
+    """``(A, Q, R, P-0)`` in the filter's own units: codes and filter steps."""
+    _, scale = _units(params)
+    a = transition(1.0)
+    q = params.q * scale @ scale
+    return a, q, params.R / params.lsb ** 2, a @ (scale @ np.array(params.P0) @ scale) @ a.T + q
+
+
+def _scaled(ops, c, v):
+    """``c * v`` for a transition coefficient 1 or 1/2: the value, or its binary point moved."""
+    return v if c == 1.0 else ops.shift(v, -1)
+
+
+def _row(ops, terms):
+    out = None
+    for c, v in terms:
+        if v is not None:
+            out = _scaled(ops, c, v) if out is None else ops.add(out, _scaled(ops, c, v))
+    return out
+
+
+def _predict_state(ops, xs):
+    """x- = A x+ (the shifts of A, each sum rounded into its point)."""
+    return [ops.rq(_row(ops, [(c, xs[j]) for c, j in row]), f"x{i + 1}") if len(row) > 1 else xs[i]
+            for i, row in enumerate(_A)]
+
+
+def _rotate(ops, m, p, c, tag):
+    """One Givens rotation of columns p and c that zeroes m[p][c] (rows below p turn with it)."""
+    a, b = m[p][p], m[p][c]
+    r = ops.sqrt(ops.add(ops.mul(a, a), ops.mul(b, b)), "d", f"r{tag}")        # r = sqrt(a^2 + b^2)
+    cos, sin = ops.div(a, r, "cs", f"c{tag}"), ops.div(b, r, "cs", f"s{tag}")   # c = a / r, s = b / r
+    for q in range(p + 1, 3):
+        u, v = m[q][p], m[q][c]
+        turned_p = [ops.mul(cos, u) if u is not None else None, ops.mul(sin, v) if v is not None else None]
+        turned_c = [ops.mul(cos, v) if v is not None else None, ops.neg(ops.mul(sin, u)) if u is not None else None]
+        m[q][p] = ops.rq(_row(ops, [(1.0, t) for t in turned_p]), "d", f"u{tag}{q}")   # c u + s v
+        m[q][c] = ops.rq(_row(ops, [(1.0, t) for t in turned_c]), "d", f"v{tag}{q}")   # c v - s u
+    m[p][p], m[p][c] = r, None
+
+
+def sqrt_update(ops, k, x, u):
+    """One update of the square-root predictor: ``(next state, outputs)`` (see above)."""
+    e = ops.rq(ops.sub(u["z"], x["x1"]), "e")                                        # e = z - x1
+    d11 = x["d11"]
+    sq = ops.mul(d11, d11)
+    s = ops.rq(ops.add(sq, k["R"]), "s")                                             # S = d11^2 + R
+    f = ops.div(k["sqrt_r"], ops.sqrt(s, "rs"), "f")                                 # f = sqrt(R / S)
+    col = [d11, x["d21"], x["d31"]]
+    kn = [ops.rq(sq, "kn", "kn1")] + [ops.rq(ops.mul(d11, col[i]), "kn", f"kn{i + 1}") for i in (1, 2)]
+    gains = [ops.div(n, s, "k", f"K{i + 1}") for i, n in enumerate(kn)]             # K = d11 D[:, 0] / S
+    xs = [ops.rq(ops.add(x[f"x{i + 1}"], ops.mul(g, e)), f"x{i + 1}", f"xu{i + 1}")  # x = x + K e
+          for i, g in enumerate(gains)]
+    col = [ops.rq(ops.mul(f, v), "d", f"dm{i + 1}") for i, v in enumerate(col)]     # D[:, 0] = f D[:, 0]
+    xp = _predict_state(ops, xs)                                                      # x- = A x
+    d = [[col[0], None, None], [col[1], x["d22"], None], [col[2], x["d32"], x["d33"]]]
+    m = [[None] * 6 for _ in range(3)]
+    for i, row in enumerate(_A):                                                      # [sqrt(s) A D, sqrt(Q)]
+        for j in range(3):
+            b = _row(ops, [(c, d[col_][j]) for c, col_ in row])
+            if b is not None:
+                m[i][j] = ops.rq(ops.mul(k["sqrt_s"], b), "d", f"m{i + 1}{j + 1}")
+        m[i][3 + i] = k[f"g{i + 1}"]
+    for p, cols in ((0, (1, 2, 3)), (1, (2, 3, 4))):
+        for c in cols:
+            _rotate(ops, m, p, c, f"{p + 1}{c + 1}")
+    rest = [v for v in m[2][2:] if v is not None]
+    norm = ops.sqrt(_row(ops, [(1.0, ops.mul(v, v)) for v in rest]), "d", "r33")    # d33 = |row 3 left|
+    state = {"x1": xp[0], "x2": xp[1], "x3": xp[2], "d11": m[0][0], "d21": m[1][0], "d31": m[2][0],
+             "d22": m[1][1], "d32": m[2][1], "d33": norm}
+    return state, {"pred": xp[0], "rate": xp[1], "accel": xp[2]}
+
+
+def plain_update(ops, k, x, u):
+    """One update of the plain (covariance) predictor: ``(next state, outputs)``."""
+    e = ops.rq(ops.sub(u["z"], x["x1"]), "e")                                        # e = z - x1
+
+    def p(i, j):
+        return x[f"p{min(i, j) + 1}{max(i, j) + 1}"]
+
+    s = ops.rq(ops.add(p(0, 0), k["R"]), "s")                                         # S = p11 + R
+    gains = [ops.div(p(i, 0), s, "k", f"K{i + 1}") for i in range(3)]                # K = P[:, 0] / S
+    xs = [ops.rq(ops.add(x[f"x{i + 1}"], ops.mul(g, e)), f"x{i + 1}", f"xu{i + 1}")  # x = x + K e
+          for i, g in enumerate(gains)]
+    pu = {(i, j): ops.rq(ops.sub(p(i, j), ops.mul(gains[i], p(0, j))), "p", f"pu{i + 1}{j + 1}")
+          for i in range(3) for j in range(i, 3)}                                     # P = P - K P[0, :]
+
+    def pu_(i, j):
+        return pu[(min(i, j), max(i, j))]
+
+    xp = _predict_state(ops, xs)                                                      # x- = A x
+    ap = [[_row(ops, [(c, pu_(col, j)) for c, col in row]) for j in range(3)] for row in _A]   # A P
+    state = {"x1": xp[0], "x2": xp[1], "x3": xp[2]}
+    for i in range(3):
+        for j in range(i, 3):
+            apa = ops.rq(_row(ops, [(c, ap[i][col]) for c, col in _A[j]]), "p", f"apa{i + 1}{j + 1}")  # A P A^T
+            total = ops.mul(k["fade"], apa)
+            if i == j:
+                total = ops.add(total, k[f"q{i + 1}"])
+            state[f"p{i + 1}{j + 1}"] = ops.rq(total, "p", f"p{i + 1}{j + 1}")       # P- = s A P A^T + Q
+    return state, {"pred": xp[0], "rate": xp[1], "accel": xp[2]}
+
+
+# -- the spec ----------------------------------------------------------------------------------------------
+
+def _sqrt_constants(params):
+    _, q, r, _ = unit_matrices(params)
+    out = {"R": Constant(r, "s", "R"), "sqrt_r": Constant(math.sqrt(r), "rs", "sqrt(R)"),
+           "sqrt_s": Constant(math.sqrt(params.s), "sqs", "sqrt(s)")}
+    out.update({f"g{i + 1}": Constant(math.sqrt(q[i, i]), "d", f"sqrt(Q)[{i}]") for i in range(3)})
+    return out
+
+
+def _plain_constants(params):
+    _, q, r, _ = unit_matrices(params)
+    out = {"R": Constant(r, "s", "R"), "fade": Constant(params.s, "fade", "s")}
+    out.update({f"q{i + 1}": Constant(q[i, i], "p", f"Q[{i}]") for i in range(3)})
+    return out
+
+
+_TRI = ((0, 0), (1, 0), (2, 0), (1, 1), (2, 1), (2, 2))
+
+
+def _sqrt_initial(params):
+    d = np.linalg.cholesky(unit_matrices(params)[3])
+    return {"x1": 0.0, "x2": 0.0, "x3": 0.0, **{f"d{i + 1}{j + 1}": float(d[i, j]) for i, j in _TRI}}
+
+
+def _plain_initial(params):
+    p = unit_matrices(params)[3]
+    return {"x1": 0.0, "x2": 0.0, "x3": 0.0, **{f"p{j + 1}{i + 1}": float(p[j, i]) for i, j in _TRI}}
+
+
+_X_STATE = (("x1", "x1"), ("x2", "x2"), ("x3", "x3"))
+VARIANTS = {
+    "sqrt": Variant("sqrt", "improved form, square-root covariance: Potter's update and a Givens time update",
+                    _X_STATE + tuple((f"d{i + 1}{j + 1}", "d") for i, j in _TRI), _sqrt_constants, _sqrt_initial,
+                    sqrt_update),
+    "plain": Variant("plain", "improved form with the covariance itself (model only: the yardstick of the "
+                              "square-root form's word lengths)",
+                     _X_STATE + tuple((f"p{j + 1}{i + 1}", "p") for i, j in _TRI), _plain_constants, _plain_initial,
+                     plain_update, hardware=lambda params: "the plain covariance form is model-only: the core "
+                                                           "carries the square root (variant sqrt)"),
+}
+
+POINTS = {p.name: p for p in (
+    Point("x1", "predicted roll angle, one filter step (2 samples) ahead (output)"),
+    Point("x2", "predicted roll rate times the filter step (output)"),
+    Point("x3", "predicted roll acceleration times the filter step squared (output)"),
+    Point("e", "innovation e = z - x1", role="operand"),
+    Point("d", "square-root covariance D and the matrix the time update triangularises", variants=("sqrt",)),
+    Point("s", "innovation variance S = d11^2 + R (p11 + R): the divisor of the gains"),
+    Point("rs", "sqrt(S)", variants=("sqrt",), frac="d"),
+    Point("f", "sqrt(R / S): the factor of D's first column", role="operand", variants=("sqrt",)),
+    Point("kn", "gain numerators d11 D[i][0]", variants=("sqrt",), frac="d"),
+    Point("k", "gains K", role="operand"),
+    Point("cs", "cosine and sine of a Givens rotation", role="operand", variants=("sqrt",)),
+    Point("sqs", "sqrt(s), the fading factor's root (constant)", role="operand", variants=("sqrt",), constant=True),
+    Point("p", "covariance P (plain form)", variants=("plain",)),
+    Point("fade", "the fading factor s (constant, plain form)", role="operand", variants=("plain",), constant=True),
+)}
+
+
+def _points_for(params):
+    return list(POINTS)
+
+
+def reference(params, variant, z):
+    """One filter of the pair in float, in its own units (codes, filter steps), from the start
+    the bit-accurate one has (x = 0, P- = A P0 A^T + Q): ``{"pred", "rate", "accel"}`` along the
+    last axis of ``z`` (codes). Both variants are the same filter in real arithmetic; this is the
+    plain form, written independently of the stage functions."""
+    a, q, r, p0 = unit_matrices(params)
+    z = np.asarray(z, dtype=np.float64)
+    out = {name: np.empty(z.shape) for name in ("pred", "rate", "accel")}
+    for index in np.ndindex(z.shape[:-1]):
+        x, p = np.zeros(3), p0.copy()
+        for n, zn in enumerate(z[index]):
+            gain = p[:, 0] / (p[0, 0] + r)                  # K = P H^T / (H P H^T + R)
+            x = x + gain * (zn - x[0])                      # x = x + K (z - H x)
+            p = p - np.outer(gain, p[0, :])                 # P = (I - K H) P
+            x, p = a @ x, a @ (params.s * p) @ a.T + q      # x = A x, P = A (s P) A^T + Q
+            for name, value in zip(("pred", "rate", "accel"), x, strict=True):
+                out[name][(*index, n)] = value
+    return out
+
+
+def _stimulus(params):
+    """Full-scale steps and sines in codes (the covariance does not depend on them)."""
+    from kfpga.model.ranges import full_scale_stimulus
+
+    return full_scale_stimulus(unit_matrices(params)[2], segment=512)
+
+
+def _ranges(params, stimulus=None):
+    from kfpga.model.ranges import float_ranges
+
+    return float_ranges(SPEC, params, list(VARIANTS.values()), _stimulus(params) if stimulus is None else stimulus)
+
+
+def _default_formats(params, ranges, *, operand_bits, state_frac):
+    from kfpga.formats import register_formats
+
+    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac)
+    # the plain form's covariance is a multiplier operand (K P, s A P A^T): at most 36 bits, its
+    # range taking the integer bits and the rest fraction bits
+    p = formats["p"]
+    if p.width > MAX_OPERAND_BITS:
+        formats["p"] = QFormat(p.int_bits, max(0, MAX_OPERAND_BITS - p.int_bits), p.rounding, p.overflow)
+    return formats
+
+
+def _validate(config):
+    return None
+
+
+def _random_params(rng):
+    return RollParams(T=float(rng.choice([0.5, 0.25, 1.0])), q=float(rng.uniform(0.2, 3.0)),
+                      R=float(rng.uniform(0.002, 0.05)), s=float(rng.choice([1.0, 4.0, 100.0, rng.uniform(1.0, 50.0)])),
+                      lsb=float(rng.choice([0.01, 0.005, 0.02])))
+
+
+def _goals(config, variant, channels=2):
+    """The sequential core's: one multiplier of the widest product (2 x 2 embedded multipliers), the
+    program and the registers in block memory, 2,500 logic cells, 75 MHz."""
+    from kfpga.model.kalman2 import WORST_PATH_GOAL_NS
+
+    return {"logic_cells": 2500, "mul18": 4, "lut_levels": 16, "worst_path_ns": WORST_PATH_GOAL_NS}
+
+
+def _scenario(name, n, seed, params):
+    """A filter's own samples (every other one of the roll series), in codes; the truth of its
+    prediction at step k is the clean roll at step k + 1."""
+    from kfpga.scenarios import adc_codes
+
+    if name not in ("sine", "random-accel"):
+        raise ValueError(f"scenario must be one of sine, random-accel, not {name!r}")
+    _, noisy, clean = synthetic_roll(2 * n + 2, seed, T=params.T)
+    truth = clean[2::2][:n] / params.lsb
+    return truth, adc_codes(noisy[0::2][:n] / params.lsb)
+
+
+SPEC = FilterSpec(
+    name="roll",
+    summary="ship-roll interval predictor (one filter of the pair): constant acceleration, improved form, "
+            "square-root covariance; predicts its next sample (1 s ahead)",
+    source="seeds/000: the combined interval Kalman predictor of ship roll",
+    params=RollParams,
+    points=POINTS,
+    inputs=(("z", "the roll angle (a 16-bit ADC code, lsb degrees per code)"),),
+    outputs=(Output("pred", "x1", "the predicted roll angle of the filter's next sample"),
+             Output("rate", "x2", "the predicted roll rate times the filter step"),
+             Output("accel", "x3", "the predicted roll acceleration times the filter step squared")),
+    variants=VARIANTS,
+    points_for=_points_for,
+    default_formats=_default_formats,
+    ranges=_ranges,
+    validate=_validate,
+    reference=reference,
+    core="kfpga.hw.roll:make_core",
+    goals=_goals,
+    default_output="pred",
+    random_params=_random_params,
+    scenario=_scenario,
+)
