@@ -45,7 +45,7 @@ def main(argv=None):
     rows = []
     for variant, samples in (("steady", args.samples), ("full", max(args.samples // 10, 1000))):
         for sim in sims:
-            r = run(build(sim, "core", variant=variant), "test_core",
+            r = run(build(sim, "core", variant=variant), "test_core", testcase="core_bit_exact",
                     params={"variant": variant, "seed": SEED, "samples": samples}, tag="bench")
             assert r["mismatches"] == 0
             rows.append({"what": f"{variant} core alone", "simulator": sim, "samples": samples,

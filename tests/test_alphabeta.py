@@ -271,6 +271,7 @@ def test_tracker_cosimulation_256_tracks_bit_exact(simulator, order, seed):
     state back to back, random valid/ready on both sides; every integer the model's."""
     need(simulator)
     result = run(build(simulator, "core", config=CONFIG, variant="steady", channels=2 * MAX_TRACKS), "test_core",
+                 testcase="core_bit_exact",
                  params={"variant": "steady", "seed": seed, "samples": 3000, "channels": 2 * MAX_TRACKS,
                          "order": order, "p_idle": 0.2, "p_ready": 0.7, "config_toml": CONFIG.to_toml()},
                  tag=f"tracker-{order}")

@@ -50,7 +50,7 @@ def test_core_full_rate(simulator, variant, samples, channels, cycles, seed):
     The steady core with its four loop stages takes a sample per clock from four channels in
     turn; the time-varying core, one update per 25 cycles.
     """
-    result = run(build(simulator, "core", variant=variant, channels=channels), "test_core",
+    result = run(build(simulator, "core", variant=variant, channels=channels), "test_core", testcase="core_bit_exact",
                  params={"variant": variant, "seed": seed, "samples": samples, "channels": channels,
                          "order": "round-robin"})
     print(f"{result['samples_per_s']:.0f} samples/s on {simulator}")

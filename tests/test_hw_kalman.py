@@ -127,7 +127,7 @@ def test_preset_cosimulation_is_bit_exact(preset, variant, simulator, seed):
     need(simulator)
     config = preset_config(preset)
     samples = 400 if variant == "full" else 1500
-    result = run(build(simulator, "core", config=config, variant=variant, channels=3), "test_core",
+    result = run(build(simulator, "core", config=config, variant=variant, channels=3), "test_core", testcase="core_bit_exact",
                  params={"variant": variant, "seed": seed, "samples": samples, "channels": 3, "p_idle": 0.2,
                          "p_ready": 0.7, "config_toml": config.to_toml()}, tag=f"preset-{preset}-{variant}")
     assert result["mismatches"] == 0 and result["ok"], result.get("first_mismatches")
