@@ -276,6 +276,15 @@ class Program:
     layout: tuple  # ((cell key, offset, width, mask), ...)
     compared: int
     net: object
+    readers: tuple = ()  # what reads each compared bit: "cell name" or "output port"
+    differ: list = None  # after a step gave None: the XOR of gold's and gate's compared bits
+
+    def differences(self):
+        """What read different values at the last step that gave ``None``."""
+        if not self.differ:
+            return []
+        x = self.differ[-1]
+        return sorted({self.readers[i] for i in range(len(self.readers)) if (x >> i) & 1})
 
     def inputs(self, **values):
         """The inputs word of ``port=value`` (ports left out are 0)."""
@@ -370,25 +379,28 @@ def _compile(net, control):
         else:
             widths = (len(conn.get("A", [])), len(conn.get("B", [])), len(conn["Y"]))
             lines.append(f"    {variables[key]} = {_cell_expr(cell['type'], p, a, b, s, widths)}")
-    gold_bits, gate_bits = _interface(net)
+    gold_bits, gate_bits, readers = _interface(net)
     if gold_bits:
-        lines.append(f"    if ({_bits_expr(gold_bits, source)}) != ({_bits_expr(gate_bits, source)}):")
+        lines.append(f"    _g, _t = {_bits_expr(gold_bits, source)}, {_bits_expr(gate_bits, source)}")
+        lines.append("    if _g != _t:")
+        lines.append("        _differ.append(_g ^ _t)")
         lines.append("        return None")
     nxt = []
     for key, off, _, mask in layout:
         d = _bits_expr(di[key]["connections"]["D"], source)
         nxt.append(f"((({d}) & {mask}) << {off})" if off else f"(({d}) & {mask})")
     lines.append("    return " + (" | ".join(nxt) if nxt else "0"))
-    scope = {"_sx": _sx, "_shift": _shift}
+    differ = []
+    scope = {"_sx": _sx, "_shift": _shift, "_differ": differ}
     exec(compile("\n".join(lines), "<reach step>", "exec"), scope)  # the step, generated from the netlist above
-    return Program(scope["step"], init, tuple(control), tuple(layout), len(gold_bits), net)
+    return Program(scope["step"], init, tuple(control), tuple(layout), len(gold_bits), net, tuple(readers), differ)
 
 
 def _interface(net):
     """``(gold bits, gate bits)``: every data-independent bit that the data path (a cell with an
     output bit that depends on the data) or an output reads in gold, and the same bit in gate."""
     tainted = net.tainted
-    gold_bits, gate_bits = [], []
+    gold_bits, gate_bits, readers = [], [], []
 
     def pair(g, t, where):
         if (g in tainted) != (t in tainted):
@@ -396,6 +408,7 @@ def _interface(net):
         if g not in tainted:
             gold_bits.append(g)
             gate_bits.append(t)
+            readers.append(where)
 
     for (side, name), cell in net.cells.items():
         if side != "gold":
@@ -415,7 +428,7 @@ def _interface(net):
     for port in net.outputs:
         for g, t in zip(net.out_bits["gold"][port], net.out_bits["gate"][port], strict=True):
             pair(g, t, f"output {port}")
-    return gold_bits, gate_bits
+    return gold_bits, gate_bits, readers
 
 
 def compile_pair(pair_path, data_inputs):
@@ -461,8 +474,8 @@ def check(pair_path, data_inputs, *, max_states=300_000):
         for inputs in combos:
             nxt = step(state, inputs)
             if nxt is None:
-                return Verdict(False, True, f"gold and gate give the data path or an output different values at a "
-                                            f"reachable state ({len(seen)} states searched)", len(seen))
+                return Verdict(False, True, f"gold and gate give {', '.join(program.differences()[:3])} different "
+                                            f"values at a reachable state ({len(seen)} states searched)", len(seen))
             if nxt not in seen:
                 if len(seen) >= max_states:
                     return Verdict(False, False, f"more than {max_states} reachable states", len(seen))
