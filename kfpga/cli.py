@@ -1133,7 +1133,7 @@ def _run_evaluate_roll(args):
         seed = _pick_seed(args.seed)
         _info(f"seed {seed}")
     result = evaluation.roll(seed=seed, samples=samples, series=series, params=params)
-    return _report_evaluation(args, plot, result, "roll", ("seed", "params", "rows", "sweep"))
+    return _report_evaluation(args, plot, result, "roll", ("seed", "params", "rows", "sweep", "formats", "fixed", "words"))
 
 
 def _run_evaluate_ls_frontend(args):

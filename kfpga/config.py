@@ -299,8 +299,9 @@ class FilterConfig:
         return cls.from_dict(data, source=str(path))
 
     @classmethod
-    def from_dict(cls, data, *, source="config"):
-        """A config from the tables of a TOML file: ``[filter]``, ``[model]``, ``[formats.*]``."""
+    def from_dict(cls, data, *, source="config", check_ranges=True):
+        """A config from the tables of a TOML file: ``[filter]``, ``[model]``, ``[formats.*]``
+        (``check_ranges``: as :class:`FilterConfig`'s)."""
         registry = _registry()
         unknown = set(data) - {"filter", "model", "formats"}
         if unknown:
@@ -322,7 +323,7 @@ class FilterConfig:
         formats = {}
         for point, value in _table(data, "formats", source).items():
             formats[point] = format_from_toml(point, value)
-        return cls(filter=spec.name, params=params, formats=formats)
+        return cls(filter=spec.name, params=params, formats=formats, check_ranges=check_ranges)
 
     def to_toml(self, *, formats=True):
         """The config as TOML text; ``formats=False`` writes the formats commented out.

@@ -328,8 +328,8 @@ def plain_update(ops, k, x, u):
     def p(i, j):
         return x[f"p{min(i, j) + 1}{max(i, j) + 1}"]
 
-    s = ops.rq(ops.add(p(0, 0), k["R"]), "s")                                         # S = p11 + R
-    gains = [ops.div(p(i, 0), s, "k", f"K{i + 1}") for i in range(3)]                # K = P[:, 0] / S
+    s = ops.rq(ops.add(p(0, 0), k["R"]), "ps")                                        # S = p11 + R
+    gains = [ops.div(p(i, 0), s, "pk", f"K{i + 1}") for i in range(3)]               # K = P[:, 0] / S
     xs = [ops.rq(ops.add(x[f"x{i + 1}"], ops.mul(g, e)), f"x{i + 1}", f"xu{i + 1}")  # x = x + K e
           for i, g in enumerate(gains)]
     pu = {(i, j): ops.rq(ops.sub(p(i, j), ops.mul(gains[i], p(0, j))), "p", f"pu{i + 1}{j + 1}")
@@ -363,7 +363,7 @@ def _sqrt_constants(params):
 
 def _plain_constants(params):
     _, q, r, _ = unit_matrices(params)
-    out = {"R": Constant(r, "s", "R"), "fade": Constant(params.s, "fade", "s")}
+    out = {"R": Constant(r, "ps", "R"), "fade": Constant(params.s, "fade", "s")}
     out.update({f"q{i + 1}": Constant(q[i, i], "p", f"Q[{i}]") for i in range(3)})
     return out
 
@@ -399,14 +399,16 @@ POINTS = {p.name: p for p in (
     Point("x3", "predicted roll acceleration times the filter step squared (output)"),
     Point("e", "innovation e = z - x1", role="operand"),
     Point("d", "square-root covariance D and the matrix the time update triangularises", variants=("sqrt",)),
-    Point("s", "innovation variance S = d11^2 + R (p11 + R): the divisor of the gains"),
+    Point("s", "innovation variance S = d11^2 + R: the divisor of the gains", variants=("sqrt",)),
     Point("rs", "sqrt(S)", variants=("sqrt",), frac="d"),
     Point("f", "sqrt(R / S): the factor of D's first column", role="operand", variants=("sqrt",)),
     Point("kn", "gain numerators d11 D[i][0]", variants=("sqrt",), frac="d"),
-    Point("k", "gains K", role="operand"),
+    Point("k", "gains K", role="operand", variants=("sqrt",)),
     Point("cs", "cosine and sine of a Givens rotation", role="operand", variants=("sqrt",)),
     Point("sqs", "sqrt(s), the fading factor's root (constant)", role="operand", variants=("sqrt",), constant=True),
     Point("p", "covariance P (plain form)", variants=("plain",)),
+    Point("ps", "innovation variance S = p11 + R (plain form)", variants=("plain",)),
+    Point("pk", "gains K (plain form)", role="operand", variants=("plain",)),
     Point("fade", "the fading factor s (constant, plain form)", role="operand", variants=("plain",), constant=True),
 )}
 
@@ -452,6 +454,12 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
     from kfpga.formats import register_formats
 
     formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac)
+    # the innovation as fine as the angle: the gain of the angle is close to 1 (s = 100 keeps the
+    # prediction covariance far above R), so e's rounding goes into every prediction undamped
+    # (0.013 deg rms with whole codes, 0.0002 with x1's fraction bits); its product is on the
+    # sequential core's one multiplier, which the squares of D already make wider than 18 bits
+    e, x1 = formats["e"], formats["x1"]
+    formats["e"] = QFormat(e.int_bits, max(e.frac_bits, x1.frac_bits), e.rounding, e.overflow)
     # the plain form's covariance is a multiplier operand (K P, s A P A^T): at most 36 bits, its
     # range taking the integer bits and the rest fraction bits
     p = formats["p"]
@@ -513,3 +521,116 @@ SPEC = FilterSpec(
     random_params=_random_params,
     scenario=_scenario,
 )
+
+
+# -- the bit-accurate interval predictor and its word lengths -------------------------------------------------
+
+#: The points of each form's covariance path: the registers, and the multiplier operands (gains,
+#: rotations, the factor of D's column), the word-length sweep's two knobs.
+COVARIANCE_POINTS = {"sqrt": (("d", "s", "rs", "kn"), ("k", "cs", "f")), "plain": (("p", "ps"), ("pk",))}
+
+
+def _codes(z, params):
+    from kfpga.scenarios import adc_codes
+
+    return adc_codes(np.asarray(z, dtype=np.float64) / params.lsb)
+
+
+def predict_same_start(z, params=None):
+    """The improved predictor in float from the bit-accurate one's start (each filter from x = 0
+    and A P0 A^T + Q, on the ADC codes of ``z``): its predictions in degrees, aligned as
+    :func:`predict`'s (``p[n]`` predicts ``z[n + 2]``)."""
+    params = RollParams() if params is None else params
+    codes = _codes(z, params)
+    out = np.empty(len(codes))
+    for parity in (0, 1):
+        out[parity::2] = reference(params, "sqrt", codes[parity::2])["pred"] * params.lsb
+    return out
+
+
+def covariance_ok(variant, values):
+    """Whether the covariance of a filter's state (raw integers) is positive definite: for the
+    square-root form every diagonal entry of D above 0 (P = D D^T), for the plain form every
+    eigenvalue of P above 0."""
+    v = {k: int(np.asarray(x)) for k, x in values.items()}
+    if variant == "sqrt":
+        return v["d11"] > 0 and v["d22"] > 0 and v["d33"] > 0
+    p = np.array([[v["p11"], v["p12"], v["p13"]], [v["p12"], v["p22"], v["p23"]], [v["p13"], v["p23"], v["p33"]]],
+                 dtype=np.float64)
+    return bool(np.all(np.linalg.eigvalsh(p) > 0))
+
+
+def predict_fixed(z, config, variant="sqrt", *, check=False):
+    """The combined interval predictor in the bit-accurate model: ``(predictions in degrees,
+    aligned as :func:`predict`'s, overflowed updates, updates whose covariance is not positive
+    definite)``; the last is counted only with ``check`` (one model call per sample)."""
+    from kfpga.fixedmodel import FixedModel
+
+    params = config.params
+    codes = _codes(z, params)
+    model = FixedModel(config, variant=variant)
+    lsb = config.formats["x1"].lsb * params.lsb
+    out = np.empty(len(codes))
+    overflowed = not_pd = 0
+    for parity in (0, 1):
+        part = codes[parity::2]
+        if not check:
+            result = model.run(part)
+            out[parity::2] = result.outputs["pred"] * lsb
+            overflowed += int(result.overflow.sum())
+            continue
+        state, preds = None, []
+        for code in part:
+            result = model.run(np.array([code]), state=state)
+            state = result.state
+            preds.append(int(result.outputs["pred"][0]))
+            overflowed += int(result.overflow[0])
+            not_pd += not covariance_ok(variant, state.values)
+        out[parity::2] = np.array(preds) * lsb
+    return out, overflowed, not_pd
+
+
+def word_config(base, variant, register_frac, operand_bits):
+    """``base`` with the covariance path of ``variant`` at ``register_frac`` fraction bits in its
+    registers and ``operand_bits``-bit multiplier operands (each keeping its integer bits); or the
+    reason there is none (an intermediate past the model's 62 bits)."""
+    from kfpga.config import ConfigError, FilterConfig
+
+    registers, operands = COVARIANCE_POINTS[variant]
+    formats = dict(base.formats)
+    for name in registers:
+        formats[name] = QFormat(base.formats[name].int_bits, register_frac)
+    for name in operands:
+        formats[name] = QFormat(base.formats[name].int_bits, max(0, operand_bits - base.formats[name].int_bits))
+    try:
+        return FilterConfig(filter="roll", params=base.params, formats=formats, check_ranges=False, max_operand_bits=62)
+    except ConfigError as exc:
+        return str(exc)
+
+
+def word_sweep(z, params=None, *, register_fracs=(0, 4, 8), operand_bits=(12, 14, 16, 18, 20, 22, 24, 26, 28)):
+    """Both forms of the predictor over word lengths: for each form, register fraction bits and
+    operand width, the updates whose covariance is not positive definite, the overflowed updates,
+    the prediction RMSE (deg) and the largest difference from the float predictor (same start)."""
+    from kfpga.config import FilterConfig
+
+    params = RollParams() if params is None else params
+    z = np.asarray(z, dtype=np.float64)
+    base = FilterConfig(filter="roll", params=params)
+    float_pred = predict_same_start(z, params)
+    rows = []
+    for variant in ("sqrt", "plain"):
+        for frac in register_fracs:
+            for bits in operand_bits:
+                config = word_config(base, variant, frac, bits)
+                row = {"form": variant, "register_frac": frac, "operand_bits": bits}
+                if isinstance(config, str):
+                    rows.append({**row, "why_not": config})
+                    continue
+                pred, overflowed, not_pd = predict_fixed(z, config, variant, check=True)
+                ok = np.isfinite(pred[:-2]) & np.isfinite(float_pred[:-2])
+                rmse, _ = prediction_rmse(z, pred)
+                rows.append({**row, "covariance_width": config.formats[COVARIANCE_POINTS[variant][0][0]].width,
+                             "updates": len(z), "not_positive_definite": not_pd, "overflowed": overflowed,
+                             "rmse_deg": rmse, "max_from_float_deg": float(np.max(np.abs(pred - float_pred)[:-2][ok]))})
+    return rows

@@ -95,7 +95,7 @@ def test_evaluate_roll_cli(tmp_path, capsys, seed):
     table = {form: r["rmse_deg"] for (data, form), r in rows.items() if data.startswith("table 1")}
     basic, improved = table["basic (predict, then update)"], table["improved: + square root (the paper's)"]
     assert improved < 0.2 < basic  # the paper's direction, and its requirement, on its own 32 samples
-    assert len(result["sweep"]) == 20 and len(result["findings"]) == 4
+    assert len(result["sweep"]) == 20 and len(result["findings"]) == 6
 
 
 def test_evaluate_roll_cli_errors(tmp_path, capsys):
@@ -112,3 +112,67 @@ def test_evaluate_roll_cli_errors(tmp_path, capsys):
     short.write_text("# a comment\nroll\n1\n2\n3\n")
     assert main(["evaluate", "roll", "--input", str(short)]) == 2
     assert "3 samples; the interval predictor needs at least 8" in capsys.readouterr().err
+
+
+# -- the bit-accurate predictor (the registered filter "roll") -----------------------------------------------
+
+def _float_run(variant, z, params):
+    """The variant's stage functions in float64 (FloatOps), one filter, from its reset state."""
+    from kfpga.config import FilterConfig
+    from kfpga.ops import FloatOps
+
+    config = FilterConfig(filter="roll", params=params)
+    v = config.spec.variants[variant]
+    x = dict(v.initial(params))
+    out = []
+    for code in z:
+        ops = FloatOps(config.formats)
+        k = ops.constants(v.constants(params))
+        xs = {n: ops.input(x[n], p, n) for n, p in v.state_for(params)}
+        nxt, o = v.update(ops, k, xs, {"z": ops.input(float(code), None, "z")})
+        x = {n: float(nxt[n].raw) for n, _ in v.state_for(params)}
+        out.append(float(o["pred"].raw))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("variant", ["sqrt", "plain"])
+def test_both_forms_are_the_kalman_filter_in_real_arithmetic(variant, seed):
+    """The stage functions run in float (Potter's update and the Givens triangularisation, or the
+    plain form) equal the plain matrix filter written independently (``roll.reference``)."""
+    from kfpga.scenarios import adc_codes
+
+    params = roll.RollParams(s=float(np.random.default_rng(seed).choice([1.0, 100.0])))
+    _, y, _ = roll.synthetic_roll(120, seed)
+    z = adc_codes(y[0::2] / params.lsb)
+    np.testing.assert_allclose(_float_run(variant, z, params), roll.reference(params, variant, z)["pred"],
+                               rtol=1e-9, atol=1e-6)
+
+
+def test_fixed_point_predictor_is_close_to_float(seed):
+    """At its default formats the square-root predictor in the core's integers stays within a
+    thousandth of a degree of float (same start), with no overflow and its covariance positive
+    definite after every update."""
+    from kfpga.config import FilterConfig
+
+    _, y, _ = roll.synthetic_roll(480, seed)
+    pred, overflowed, not_pd = roll.predict_fixed(y, FilterConfig(filter="roll"), check=True)
+    assert np.max(np.abs(pred - roll.predict_same_start(y))[:-2]) < 1e-3
+    assert overflowed == 0 and not_pd == 0
+
+
+def test_the_square_root_keeps_the_covariance_where_the_plain_form_loses_it():
+    """With the 18-bit gains of one embedded multiplier the plain form's P stops being positive
+    definite within its first updates; the square-root form keeps D nonsingular even with 12-bit
+    operands and whole-code registers."""
+    _, y, _ = roll.synthetic_roll(200, 3)
+    rows = {(r["form"], r["operand_bits"]): r for r in roll.word_sweep(y, register_fracs=(0,), operand_bits=(12, 18))}
+    assert rows[("sqrt", 12)]["not_positive_definite"] == 0 and rows[("sqrt", 18)]["not_positive_definite"] == 0
+    assert rows[("plain", 18)]["not_positive_definite"] > 150
+
+
+def test_positive_definiteness_checks():
+    assert roll.covariance_ok("sqrt", {"d11": 3, "d22": 1, "d33": 2})
+    assert not roll.covariance_ok("sqrt", {"d11": 3, "d22": 0, "d33": 2})
+    identity = {"p11": 1, "p22": 1, "p33": 1, "p12": 0, "p13": 0, "p23": 0}
+    assert roll.covariance_ok("plain", identity)
+    assert not roll.covariance_ok("plain", {**identity, "p12": 2})  # eigenvalues 3, -1, 1
