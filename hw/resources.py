@@ -147,6 +147,13 @@ def _is_ff(cell_type):
     return cell_type in _FF_TYPES or "dff" in cell_type.lower()
 
 
+def _is_sequential(cell_type):
+    """A flip-flop, or a block memory (its ports are registered: an M4K block's inputs are)."""
+    from kfpga.hw.timing import MEMORY_CELL
+
+    return _is_ff(cell_type) or cell_type == MEMORY_CELL
+
+
 def longest_path(module, cost):
     """Largest total ``cost(cell)`` along a combinational path between flip-flops / ports.
 
@@ -155,7 +162,7 @@ def longest_path(module, cost):
     """
     driver = {}  # bit -> cell name
     for name, cell in module["cells"].items():
-        if _is_ff(cell["type"]):
+        if _is_sequential(cell["type"]):
             continue
         for port, direction in cell.get("port_directions", {}).items():
             if direction == "output":
@@ -174,23 +181,28 @@ def longest_path(module, cost):
                         yield driver[bit]
 
     def resolve(start):
-        # iterative post-order DFS: combinational depth of a cell's output
-        stack = [(start, False)]
+        # iterative post-order DFS: combinational depth of a cell's output; a cell is expanded
+        # once (reconverging paths would otherwise push it once per path)
+        stack, open_ = [(start, False)], set()
         while stack:
             name, done = stack.pop()
             if name in depth:
                 continue
             if done:
                 depth[name] = cost(cells[name]) + max((depth[i] for i in inputs(name)), default=0)
+                open_.discard(name)
                 continue
+            if name in open_:
+                raise ValueError(f"a combinational loop through cell {name}")
+            open_.add(name)
             stack.append((name, True))
-            stack.extend((i, False) for i in inputs(name) if i not in depth)
+            stack.extend((i, False) for i in set(inputs(name)) if i not in depth)
         return depth[start]
 
     best, best_sink = 0, None
     sinks = []  # (bit, what the path ends at)
     for cell_name, cell in cells.items():
-        if _is_ff(cell["type"]):
+        if _is_sequential(cell["type"]):
             for port, direction in cell.get("port_directions", {}).items():
                 if direction == "input":
                     sinks += [(b, ("ff", cell_name)) for b in cell["connections"].get(port, []) if isinstance(b, int)]
@@ -279,6 +291,18 @@ def _logic_cells(carry):
     return luts + alu_bits + ff_bits - packed
 
 
+def _block_memory_bits(module):
+    """Bits of the block memories (``kfpga_mem`` black boxes: a memory Yosys kept as one cell,
+    which ``stat`` does not count as memory bits)."""
+    from kfpga.hw.timing import MEMORY_CELL
+
+    def param(cell, name):
+        value = cell["parameters"].get(name, 0)
+        return int(value, 2) if isinstance(value, str) else int(value)
+
+    return sum(param(c, "SIZE") * param(c, "WIDTH") for c in module["cells"].values() if c["type"] == MEMORY_CELL)
+
+
 def _memory_bits(log):
     bits = 0
     for line in log.splitlines():
@@ -350,7 +374,7 @@ def estimate(verilog, top, *, work_dir=None, timing=None):
         "logic_cells": les,
         "mul18": mul18,
         "mul9": mul9,
-        "memory_bits": _memory_bits(log),
+        "memory_bits": _memory_bits(log) or _block_memory_bits(synth),
         "lut_levels": levels,
         "lut_levels_no_carry": no_carry,
         "longest_path_ends_at": where,

@@ -9,15 +9,19 @@ ports as three copies of it). The operations are the model's own integer functio
 computes the model's integers for any update the operations layer can write, the square-root
 covariance forms included.
 
-Each operation takes two cycles: its instruction is in the program memory's read register, and
-its operands' addresses go to the register file; then its operands are read, the result is
-computed and written. A product takes one cycle more (the multiplier's output is registered), a
-division ``quotient_bits + 1`` more and a square root ``root_bits + 1`` more (the units' latencies).
+Each operation takes three cycles, each with at most one carry chain, one multiplier or one
+shifter between registers (so that it meets 50 MHz on the -8 part): READ (the instruction is in
+the program memory's read register: its operands are addressed, its operation and its target
+format's constants are registered), EXEC (the operands are read and the result computed), WRITE
+(the result is written). A requantisation takes two more (the shift, then the saturation), a
+product one more (the multiplier's output is registered), a division and a square root their
+unit's latency and four more (to shift its operand, to start it, to bound its result, to sign
+it); an output copy has no WRITE.
 """
 
 from __future__ import annotations
 
-from amaranth import Const, Module, Mux, Signal, signed, unsigned
+from amaranth import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib.memory import Memory
 
 from kfpga.fixed import Rounding
@@ -92,7 +96,9 @@ class SequentialCore(Core):
 
     def _op_cycles(self, ins):
         p = self.program
-        return {"mul": 3, "div": 2 + p.quotient_bits + 1, "sqrt": 2 + p.radicand_bits // 2 + 1}.get(ins.op, 2)
+        # READ, EXEC, WRITE; rq: SHIFT and SATURATE between; a product: PRODUCT; a unit: PREP,
+        # START, its latency (quotient or root bits + 1), BOUND and SIGN; out: no WRITE
+        return {"out": 2, "rq": 5, "mul": 4, "div": p.quotient_bits + 8, "sqrt": p.radicand_bits // 2 + 8}.get(ins.op, 3)
 
     @property
     def cycles_per_update(self):
@@ -136,14 +142,6 @@ class SequentialCore(Core):
         for name in _FIELDS:
             ins[name] = fetch.data[offset:offset + layout[name]]
             offset += layout[name]
-        shift = ins["shift"].as_signed()
-        op = {name: ins["op"] == OPS.index(name) for name in OPS}
-
-        def amount(kind, value):
-            """A shift amount sliced to the bits the program's largest such shift needs."""
-            largest = max([abs(i.shift) for i in p.instructions if i.op == kind] + [1])
-            return value.as_unsigned()[:largest.bit_length()]
-
         channel = Signal.like(self.i.payload.channel, name="channel")
         in_range = Signal(name="in_range")
         m.d.comb += in_range.eq(channel < self.channels if self.channels < 2 ** len(channel) else 1)
@@ -155,53 +153,91 @@ class SequentialCore(Core):
             """A register address; state k of channel c is at base | c << bits | k."""
             return Mux(is_state(field), field | (channel << p.state_bits), field) if len(channel) else field
 
-        # operands: addressed in the first cycle of an operation, read in the second and later
+        # operands: addressed in the first cycle of an operation (READ), read from then on
         zero_state = [Signal(name=f"zero_{n}") for n in "abc"]  # an out-of-range channel reads zero
         for port, name, z in zip(reads, "abc", zero_state, strict=True):
             m.d.comb += [port.addr.eq(physical(ins[name])), port.en.eq(1)]
             m.d.sync += z.eq(is_state(ins[name]) & ~in_range)
         a, b, c = (Mux(z, 0, port.data).as_signed() for port, z in zip(reads, zero_state, strict=True))
 
-        # -- the units -----------------------------------------------------------------------------------
-        alu = Signal(signed(w), name="alu")
-        with m.Switch(ins["op"]):
-            for name, value in (("move", a), ("add", a + b), ("sub", a - b), ("neg", -a), ("abs", Mux(a < 0, -a, a)),
-                                ("lt", a < b), ("mux", Mux(a != 0, b, c)), ("shl", a << amount("shl", shift))):
-                with m.Case(OPS.index(name)):
-                    m.d.comb += alu.eq(value)
-        rq_value, rq_flag = _requantize(m, a, shift, amount("rq", Mux(shift < 0, -shift, shift)), ins["width"],
-                                        ins["rounding"], ins["wrap"], w)
+        # what READ registers of the instruction: its operation, and the constants of its target
+        # format (a table of the program's (shift, width) pairs, not shifters of run-time widths)
+        op = {name: Signal(name=f"op_{name}") for name in OPS}
+        rounding, wrap = Signal.like(ins["rounding"], name="k_rounding"), Signal(name="k_wrap")
+        largest = max([abs(i.shift) for i in p.instructions] + [1])
+        k_amount, k_right = Signal(range(largest + 1), name="k_amount"), Signal(name="k_right")
+        k_half, k_fix = Signal(w + 1, name="k_half"), Signal(w + 1, name="k_fix")  # 2**(s-1), 2**s - 1
+        k_top, k_mask = Signal(w + 1, name="k_top"), Signal(w + 2, name="k_mask")  # 2**(width-1) - 1, 2**width - 1
+        table = sorted({(i.shift, i.width) for i in p.instructions if i.op in ("rq", "div", "sqrt", "shl")})
+
+        def read_instruction():
+            m.d.sync += [op[name].eq(ins["op"] == OPS.index(name)) for name in OPS]
+            m.d.sync += [rounding.eq(ins["rounding"]), wrap.eq(ins["wrap"])]
+            with m.Switch(Cat(ins["shift"], ins["width"])):
+                for sh, width in table:
+                    with m.Case((sh & 0xFF) | width << 8):
+                        m.d.sync += [k_amount.eq(abs(sh)), k_right.eq(sh > 0),
+                                     k_half.eq(1 << (sh - 1) if sh > 0 else 0), k_fix.eq((1 << sh) - 1 if sh > 0 else 0),
+                                     k_top.eq((1 << max(width - 1, 0)) - 1), k_mask.eq((1 << width) - 1)]
+
+        # -- the units: each result goes to one register, written in the operation's last cycle --------
+        result, flag = Signal(signed(w), name="result"), Signal(name="result_flag")
         wa, wb = p.mul_widths
-        product = Signal(signed(w), name="product")
-        m.d.sync += product.eq(a[:wa].as_signed() * b[:wb].as_signed())
-        limit = Signal(w, name="limit")  # 2**(width - 1) - 1: the largest quotient or root of the target
-        m.d.comb += limit.eq((Const(1, w + 1) << (ins["width"] - 1)[:7]) - 1)
-        div_value, div_flag, div_start = Signal(signed(w), name="div_value"), Signal(), Signal()
-        div_done = Const(1, 1)
+        mul_a, mul_b = Signal(signed(wa), name="mul_a"), Signal(signed(wb), name="mul_b")
+        alu = Signal(signed(w), name="alu")
+        m.d.comb += alu.eq(Mux(op["add"], a + b, 0) | Mux(op["sub"], a - b, 0) | Mux(op["neg"], -a, 0)
+                           | Mux(op["abs"], Mux(a < 0, -a, a), 0) | Mux(op["lt"], a < b, 0)
+                           | Mux(op["mux"], Mux(a != 0, b, c), 0) | Mux(op["shl"], a << k_amount, 0)
+                           | Mux(op["move"], a, 0))
+        # rq in three steps: the rounding addend added; the shift; saturation or wrap-around
+        negative = a < 0
+        addend = Signal(signed(w + 2), name="rq_addend")
+        with m.Switch(rounding):
+            with m.Case(ROUNDINGS.index(Rounding.NEAREST)):
+                m.d.comb += addend.eq(k_half)
+            with m.Case(ROUNDINGS.index(Rounding.ROUND)):
+                m.d.comb += addend.eq(Mux(k_right, k_half - negative, 0))
+            with m.Case(ROUNDINGS.index(Rounding.CONVERGENT)):  # the bit that becomes the LSB breaks a tie
+                m.d.comb += addend.eq(Mux(k_right, k_half - 1 + (a >> k_amount)[0], 0))
+            with m.Case(ROUNDINGS.index(Rounding.FIX)):
+                m.d.comb += addend.eq(Mux(negative, k_fix, 0))
+        summed = Signal(signed(w + 2), name="rq_sum")
+        moved = Signal(signed(w + 2), name="rq_moved")
+        top = k_top.as_signed()
+        kept = Signal(w + 2, name="rq_kept")  # the low width bits ...
+        m.d.comb += kept.eq(moved.as_unsigned() & k_mask)
+        wrapped = (kept - ((kept & (k_top + 1)) << 1)).as_signed()  # ... as a signed width-bit value
+        high, low = moved > top, moved < -top - 1
+        # a division or a root: its operand prepared, the unit run, its result bounded
+        neg_r, bad_r = Signal(name="neg_r"), Signal(name="bad_r")
+        held = Signal(w, name="held")  # a unit's result
+        magnitude = Signal(w, name="magnitude")  # a unit's operand before its shift
+        unit_done, unit_value, unit_overflow = Const(1, 1), Const(0, 1), Const(0, 1)
+        start = Signal(name="unit_start")
         if p.count("div"):
             div = Divider(dividend_bits=p.dividend_bits, divisor_bits=p.divisor_bits, quotient_bits=p.quotient_bits)
             m.submodules.divider = div
-            magnitude = Mux(a < 0, -a, a).as_unsigned()
-            m.d.comb += [div.i.valid.eq(div_start), div.o.ready.eq(1),
-                         div.i.payload.dividend.eq((magnitude << amount("div", shift))[:p.dividend_bits]),
-                         div.i.payload.divisor.eq(Mux(b > 0, b.as_unsigned(), 0)[:p.divisor_bits])]
-            q = div.o.payload.quotient
-            bad = div.o.payload.overflow | (b <= 0) | (q > limit)
-            held = Mux(bad, limit, q)
-            m.d.comb += [div_flag.eq(bad), div_value.eq(Mux(a < 0, -held, held))]
-            div_done = div.o.valid
-        sqrt_value, sqrt_flag, sqrt_start = Signal(signed(w), name="sqrt_value"), Signal(), Signal()
-        sqrt_done = Const(1, 1)
+            num, den = Signal(p.dividend_bits, name="div_num"), Signal(p.divisor_bits, name="div_den")
+            m.d.comb += [div.i.valid.eq(start & op["div"]), div.o.ready.eq(1),
+                         div.i.payload.dividend.eq(num), div.i.payload.divisor.eq(den)]
         if p.count("sqrt"):
-            unit = SquareRoot(radicand_bits=p.radicand_bits)
-            m.submodules.square_root = unit
-            by = amount("sqrt", Mux(shift < 0, -shift, shift))
-            radicand = Mux(shift >= 0, a << by, a >> by)  # a floor shift: a is not negative here
-            m.d.comb += [unit.i.valid.eq(sqrt_start), unit.o.ready.eq(1),
-                         unit.i.payload.radicand.eq(Mux(a < 0, 0, radicand[:p.radicand_bits]))]
-            r = unit.o.payload.root
-            m.d.comb += [sqrt_flag.eq((a < 0) | (r > limit)), sqrt_value.eq(Mux(a < 0, 0, Mux(r > limit, limit, r)))]
-            sqrt_done = unit.o.valid
+            root = SquareRoot(radicand_bits=p.radicand_bits)
+            m.submodules.square_root = root
+            radicand = Signal(p.radicand_bits, name="radicand")
+            m.d.comb += [root.i.valid.eq(start & op["sqrt"]), root.o.ready.eq(1), root.i.payload.radicand.eq(radicand)]
+        if p.count("div") or p.count("sqrt"):
+            done = Signal(name="unit_done")
+            value = Signal(w, name="unit_value")
+            over = Signal(name="unit_overflow")
+            cases = []
+            if p.count("div"):
+                cases.append((op["div"], div.o.valid, div.o.payload.quotient, div.o.payload.overflow))
+            if p.count("sqrt"):
+                cases.append((op["sqrt"], root.o.valid, root.o.payload.root, Const(0, 1)))
+            for is_op, valid, out, ovf in cases:
+                with m.If(is_op):
+                    m.d.comb += [done.eq(valid), value.eq(out), over.eq(ovf)]
+            unit_done, unit_value, unit_overflow = done, value, over
 
         # -- the schedule -------------------------------------------------------------------------------
         pc = Signal(range(len(p.instructions) + 1), name="pc")
@@ -218,12 +254,7 @@ class SequentialCore(Core):
         def write(addr, data):
             m.d.comb += [wr_addr.eq(addr), wr_data.eq(data), wr_en.eq(1)]
 
-        def result(data, flag=None):
-            """Write an operation's result (never into the state of an out-of-range channel)."""
-            with m.If(~(is_state(ins["dst"]) & ~in_range)):
-                write(physical(ins["dst"]), data)
-            if flag is not None:
-                m.d.sync += flags.eq(flags | flag)
+        def next_instruction():
             m.d.comb += pc_next.eq(pc + 1)
             with m.If(pc == len(p.instructions) - 1):
                 m.next = "EMIT"
@@ -235,8 +266,7 @@ class SequentialCore(Core):
         self.flag_outputs(m, 1)
         with m.FSM(name="schedule") as fsm:
             with m.State("INIT"):  # every channel's reset state into the register file
-                k = init_count[:p.state_bits]
-                write(Const(p.state_base, abits) | (init_count << 0), select(reset_values, k))
+                write(Const(p.state_base, abits) | init_count, select(reset_values, init_count[:p.state_bits]))
                 m.d.sync += init_count.eq(init_count + 1)
                 with m.If(init_count == init_last):
                     m.next = "IDLE"
@@ -253,39 +283,65 @@ class SequentialCore(Core):
                         m.next = "READ"
                     else:
                         m.next = f"LOAD_{j + 1}"
-            with m.State("READ"):  # the instruction is here; its operands are addressed
+            with m.State("READ"):  # the instruction is here: its operands are addressed, its constants taken
+                read_instruction()
                 m.next = "EXEC"
-            with m.State("EXEC"):
-                with m.If(op["mul"]):
-                    m.next = "PRODUCT"
-                with m.Elif(op["div"]):
-                    m.d.comb += div_start.eq(1)
-                    m.next = "DIVIDE"
-                with m.Elif(op["sqrt"]):
-                    m.d.comb += sqrt_start.eq(1)
-                    m.next = "ROOT"
-                with m.Elif(op["out"]):
+            with m.State("EXEC"):  # the operands are here
+                m.d.sync += [result.eq(alu), flag.eq(0), summed.eq(a + addend), mul_a.eq(a[:wa]), mul_b.eq(b[:wb])]
+                # a division's dividend is |a|, a root's radicand a (0 if negative): shifted in PREP
+                m.d.sync += [magnitude.eq(Mux(negative, Mux(op["div"], -a, 0), a)), neg_r.eq(negative),
+                             bad_r.eq(Mux(op["div"], b <= 0, negative))]
+                if p.count("div"):
+                    m.d.sync += den.eq(Mux(b > 0, b.as_unsigned(), 0)[:p.divisor_bits])
+                with m.If(op["out"]):
                     with m.Switch(ins["dst"]):
                         for j, reg in enumerate(outs.values()):
                             with m.Case(j):
                                 m.d.sync += reg.eq(a)
-                    m.d.comb += pc_next.eq(pc + 1)
-                    with m.If(pc == len(p.instructions) - 1):
-                        m.next = "EMIT"
-                    with m.Else():
-                        m.next = "READ"
+                    next_instruction()
                 with m.Elif(op["rq"]):
-                    result(rq_value, rq_flag)
+                    m.next = "SHIFT"
+                with m.Elif(op["mul"]):
+                    m.next = "PRODUCT"
+                with m.Elif(op["div"] | op["sqrt"]):
+                    m.next = "PREP"
                 with m.Else():
-                    result(alu)
-            with m.State("PRODUCT"):
-                result(product)
-            with m.State("DIVIDE"):
-                with m.If(div_done):
-                    result(div_value, div_flag)
-            with m.State("ROOT"):
-                with m.If(sqrt_done):
-                    result(sqrt_value, sqrt_flag)
+                    m.next = "WRITE"
+            with m.State("SHIFT"):
+                m.d.sync += moved.eq(Mux(k_right, summed >> k_amount, summed << k_amount))
+                m.next = "SATURATE"
+            with m.State("SATURATE"):
+                m.d.sync += [result.eq(Mux(wrap, wrapped, Mux(high, top, Mux(low, -top - 1, moved)))),
+                             flag.eq(high | low)]
+                m.next = "WRITE"
+            with m.State("PRODUCT"):  # from registered operands: the multiplier alone in the cycle
+                m.d.sync += result.eq(mul_a * mul_b)
+                m.next = "WRITE"
+            with m.State("PREP"):  # the operand shifted: left, or (a root's negative shift) right, a floor shift
+                if p.count("div"):
+                    m.d.sync += num.eq((magnitude << k_amount)[:p.dividend_bits])
+                if p.count("sqrt"):
+                    m.d.sync += radicand.eq(Mux(k_right, magnitude << k_amount, magnitude >> k_amount)[:p.radicand_bits])
+                m.next = "START"
+            with m.State("START"):
+                m.d.comb += start.eq(1)
+                m.next = "WAIT"
+            with m.State("WAIT"):
+                with m.If(unit_done):
+                    m.d.sync += [held.eq(unit_value), flag.eq(bad_r | unit_overflow)]
+                    m.next = "BOUND"
+            with m.State("BOUND"):  # the quotient or root bounded by its format ...
+                with m.If(flag | (held > k_top)):
+                    m.d.sync += [held.eq(k_top), flag.eq(1)]
+                m.next = "SIGN"
+            with m.State("SIGN"):  # ... then a quotient takes the dividend's sign; a negative radicand's root is 0
+                m.d.sync += result.eq(Mux(op["div"] & neg_r, -held, Mux(op["sqrt"] & neg_r, 0, held)))
+                m.next = "WRITE"
+            with m.State("WRITE"):
+                with m.If(~(is_state(ins["dst"]) & ~in_range)):  # never an out-of-range channel's state
+                    write(physical(ins["dst"]), result)
+                m.d.sync += flags.eq(flags | flag)
+                next_instruction()
             with m.State("EMIT"):
                 with m.If(~self.o.valid | self.o.ready):
                     m.d.sync += self.o.valid.eq(1)
@@ -296,38 +352,3 @@ class SequentialCore(Core):
         return m
 
 
-def _requantize(m, x, shift, amount, width, rounding, wrap, w):
-    """The operations layer's ``rq`` with the format's rules as run-time inputs: ``x * 2**-shift``
-    (``amount = |shift|``) rounded by ``rounding`` (an index of :data:`~kfpga.program.ROUNDINGS`),
-    then saturated, or wrapped when ``wrap``, to ``width`` bits; ``(value, flag)`` as
-    :func:`kfpga.fixed.requantize` gives them."""
-    negative = x < 0
-    right = shift > 0
-    half = Signal(w + 1, name="rq_half")  # 2**(shift - 1), half an LSB of the result
-    m.d.comb += half.eq(Mux(right, Const(1, w + 1) << (amount - 1)[:len(amount)], 0))
-    lsb = (x >> amount)[0]  # the bit that becomes the LSB
-    addend = Signal(signed(w + 2), name="rq_addend")
-    with m.Switch(rounding):
-        with m.Case(ROUNDINGS.index(Rounding.NEAREST)):
-            m.d.comb += addend.eq(half)
-        with m.Case(ROUNDINGS.index(Rounding.ROUND)):
-            m.d.comb += addend.eq(Mux(right, half - negative, 0))
-        with m.Case(ROUNDINGS.index(Rounding.CONVERGENT)):
-            m.d.comb += addend.eq(Mux(right, half - 1 + lsb, 0))
-        with m.Case(ROUNDINGS.index(Rounding.FIX)):
-            m.d.comb += addend.eq(Mux(right & negative, (Const(1, w + 1) << amount) - 1, 0))
-        with m.Default():  # floor
-            m.d.comb += addend.eq(0)
-    moved = Signal(signed(w + 2), name="rq_moved")
-    m.d.comb += moved.eq(Mux(right, (x + addend) >> amount, x << Mux(right, 0, amount)))
-    top = Signal(signed(w + 2), name="rq_max")  # 2**(width - 1) - 1
-    m.d.comb += top.eq((Const(1, w + 2) << (width - 1)[:7]) - 1)
-    bottom = -top - 1
-    high, low = moved > top, moved < bottom
-    kept = Signal(w + 2, name="rq_kept")  # the low width bits
-    m.d.comb += kept.eq(moved.as_unsigned() & ((Const(1, w + 3) << width) - 1))
-    wrapped = Signal(signed(w + 2), name="rq_wrapped")  # ... as a signed width-bit value
-    m.d.comb += wrapped.eq(kept - ((kept & (top + 1).as_unsigned()) << 1))
-    value = Signal(signed(w), name="rq_value")
-    m.d.comb += value.eq(Mux(wrap, wrapped, Mux(high, top, Mux(low, bottom, moved))))
-    return value, high | low
