@@ -213,7 +213,7 @@ def test_square_root_on_every_backend(seed, src, dst):
     def stage(ops, k, x, u):
         return {}, {"out": ops.sqrt(u["a"], dst, "out")}
 
-    raws = [0, 1, 2, 3, 4, -1, src.min_raw, src.max_raw] + rng.integers(src.min_raw, src.max_raw + 1, 200).tolist()
+    raws = [0, 1, 2, 3, 4, -1, src.min_raw, src.max_raw, *rng.integers(src.min_raw, src.max_raw + 1, 200).tolist()]
     raws += [r * r for r in rng.integers(0, 1 << (src.width // 2 - 1), 20).tolist()]  # perfect squares
     results = run_backends(stage, raws, src, amaranth=False)
     for raw, (got, flag) in zip(raws, results["fraction"], strict=True):
