@@ -30,7 +30,7 @@ from kfpga.hw.divider import Divider
 from kfpga.hw.sqrt import SquareRoot
 from kfpga.hw.storage import m4k_blocks, select
 from kfpga.ops import Fx
-from kfpga.program import OPS, ROUNDINGS, build_program
+from kfpga.program import OPS, ROUNDINGS, build_program, handshake_twin
 
 __all__ = ["SequentialCore", "encode"]
 
@@ -90,9 +90,23 @@ class SequentialCore(Core):
         Sticky: some write saturated (or wrapped) since reset.
     """
 
-    def __init__(self, config, variant, *, channels=1):
+    def __init__(self, config, variant, *, channels=1, program=None):
         super().__init__(config, variant, channels)
-        self.program = build_program(config, variant, channels=channels, channel_bits=len(self.i.payload.channel))
+        self.program = program or build_program(config, variant, channels=channels,
+                                                channel_bits=len(self.i.payload.channel))
+
+    def formal_twin(self):
+        """The core on a short, narrow copy of its program (:func:`kfpga.program.handshake_twin`):
+        the same handshake, whole updates within a bounded check's reach."""
+        from kfpga.hw.generate import figures_only
+
+        figures_only(self)  # the twin is built instead of this core
+        return SequentialCore(self.config, self.variant, channels=self.channels, program=handshake_twin(self.program))
+
+    @property
+    def startup_cycles(self):
+        """Cycles after reset before the first sample is taken (the reset state written)."""
+        return self.channels << self.program.state_bits
 
     def _op_cycles(self, ins):
         p = self.program

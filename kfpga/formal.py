@@ -71,6 +71,13 @@ def _cores():
             if spec.variants[variant].hardware(config.params):
                 continue
             core = figures_only(spec.make_core(config, variant))  # each job makes its own
+            twin = hasattr(core, "formal_twin")  # a core whose handshake a shorter twin has (hw/sequencer.py)
+            if twin:
+                core = figures_only(core.formal_twin())
+
+            def make(s=spec, c=config, v=variant, twin=twin):
+                core = s.make_core(c, v)
+                return core.formal_twin() if twin else core
             # what a core holds at most: a steady core its input register, one sample in the loop
             # (one channel: the next waits for the write-back), one per output step's register
             # and the output register; a time-varying core the update under way and its result
@@ -84,8 +91,11 @@ def _cores():
                 drain = core.latency + (capacity - 1) * core.cycles_per_update + 2
             else:
                 capacity, drain = 2, core.latency + 2
-            out.append((f"{spec.name} {variant} core", core.latency, drain, capacity,
-                        lambda s=spec, c=config, v=variant: s.make_core(c, v), getattr(core, "formal_depth", None)))
+            # a core that first writes its reset state takes no sample before that: count it in
+            latency = core.latency + getattr(core, "startup_cycles", 0)
+            drain += getattr(core, "startup_cycles", 0)
+            label = f"{spec.name} {variant} core" + (" (handshake twin)" if twin else "")
+            out.append((label, latency, drain, capacity, make, getattr(core, "formal_depth", None)))
     return out
 
 

@@ -366,3 +366,30 @@ def execute(program, samples, channels):
         outs.append(dict(zip((name for name, _ in program.outputs), word, strict=True)))
         flags.append(flag)
     return outs, flags
+
+
+def handshake_twin(program, width=8):
+    """A short, narrow copy of ``program`` for the formal stream checks of its core.
+
+    The sequential core's handshake (take a sample, run the program, give the estimate) does not
+    depend on what the program computes: only on how long it runs, which is the length of each
+    kind of operation. The twin keeps one operation of each kind the program has (a division
+    and a square root with units 3 and 2 bits wide; one of the adder's, which all take the same
+    cycles), one output copy and one state write, on
+    ``width``-bit words, so that a bounded check covers whole updates from reset."""
+    import dataclasses
+
+    kept, seen = [], set()
+    for ins in program.instructions:
+        # the operations of the adder (move, add, ..., mux) all take READ, EXEC, WRITE: one stands for them
+        kind = ins.op if ins.op in ("rq", "mul", "div", "sqrt") else "alu"
+        if kind not in seen and ins.op not in ("out", "move"):
+            seen.add(kind)
+            kept.append(ins)
+    first_state = next(iter(program.state_addrs))
+    kept.append(next(i for i in program.instructions if i.op == "out"))
+    kept.append(Instruction("move", program.state_base, kept[0].dst))
+    mask = (1 << width) - 1
+    return dataclasses.replace(program, instructions=tuple(kept), init=tuple(v & mask for v in program.init),
+                               state_addrs={first_state: program.state_base}, width=width, mul_widths=(4, 4),
+                               dividend_bits=6, divisor_bits=3, quotient_bits=3, radicand_bits=4, state_bits=1)

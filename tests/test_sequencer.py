@@ -128,3 +128,19 @@ def test_square_root_unit(bits, seed):
 def test_a_radicand_width_must_be_even():
     with pytest.raises(ValueError, match="^radicand_bits must be an even integer >= 2, not 7$"):
         SquareRoot(radicand_bits=7)
+
+
+def test_the_handshake_twin_is_a_working_core(seed):
+    """The formal checks' twin of the roll core (a short, narrow copy of its program) takes and
+    gives one word per sample, at its declared latency; its handshake is the core's own code."""
+    from kfpga.sim.amaranth_streams import measure_timing
+
+    config = FilterConfig(filter="roll")
+    twin = SequentialCore(config, "sqrt", channels=2).formal_twin()
+    assert len(twin.program.instructions) < 10 and twin.program.width == 8
+    words = [{"channel": i % 2, "z": int(v)} for i, v in enumerate(np.random.default_rng(seed).integers(-99, 99, 30))]
+    assert len(run_stream(twin, words, seed=seed, p_idle=0.3, p_ready=0.5, extra_cycles=40)) == 30
+    single = SequentialCore(config, "sqrt", channels=1).formal_twin()
+    latency, accepted, produced = measure_timing(single, config)
+    assert latency == single.latency
+    assert accepted[2:5] == produced[:3] == [single.cycles_per_update] * 3
