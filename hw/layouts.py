@@ -29,8 +29,7 @@ def input_layout(config, channels, bits=None):
 
 def output_layout(config, channels, bits=None):
     """``channel``, every output field in its point's format, and the sample's ``overflow`` flag."""
-    f = config.formats
     fields = {"channel": unsigned(channel_bits(channels) if bits is None else bits)}
-    fields.update({o.name: signed(f[o.point].width) for o in config.outputs})
+    fields.update({o.name: signed(config.output_format(o.name).width) for o in config.outputs})
     fields["overflow"] = 1
     return data.StructLayout(fields)

@@ -165,7 +165,7 @@ def precision_warnings(config, budget=0.01):
     share = math.sqrt((1.0 + budget) ** 2 - 1.0)
     out = []
     for o in spec.outputs_for(config.params):
-        fmt = config.formats.get(o.point)
+        fmt = config.formats.get(o.point) if isinstance(o.point, str) else None
         sigma = std.get(o.name)
         if fmt is None or not sigma or fmt.lsb / math.sqrt(12.0) <= share * sigma:
             continue

@@ -1143,7 +1143,7 @@ def _run_evaluate_ls_frontend(args):
     seed = _pick_seed(args.seed)
     _info(f"seed {seed}")
     result = evaluation.ls_frontend(seed=seed)
-    return _report_evaluation(args, plot, result, "ls_frontend", ("seed", "scenario", "params", "rows", "windows"))
+    return _report_evaluation(args, plot, result, "ls_frontend", ("seed", "scenario", "params", "rows", "windows", "fixed"))
 
 
 # -- filters ---------------------------------------------------------------------------------

@@ -153,7 +153,7 @@ class FilterConfig:
         raise KeyError(name)
 
     def output_format(self, name):
-        return self.formats[self.output(name).point]
+        return self.point_format(self.output(name).point)
 
     def constants(self, variant):
         """``{name: (value, point) | structural}`` of ``variant`` (see :class:`~kfpga.spec.Variant`)."""

@@ -16,8 +16,8 @@ import numpy as np
 
 __all__ = ["AlphaBetaScenario", "alpha_beta", "alpha_beta_table", "alpha_beta_plot", "NavigationScenario", "tukey53h",
            "tukey53h_table", "tukey53h_findings", "tukey53h_plot", "cubic_smoothing", "sliding_wls", "roll", "roll_table",
-           "roll_findings", "roll_plot", "DecelerationScenario", "ls_frontend", "ls_frontend_table", "ls_frontend_findings",
-           "ls_frontend_plot"]
+           "roll_findings", "roll_plot", "DecelerationScenario", "deceleration_log", "ls_frontend", "ls_frontend_table",
+           "ls_frontend_findings", "ls_frontend_plot", "ls_frontend_fixed", "SWITCHED", "BIT_ACCURATE"]
 
 
 @dataclass(frozen=True)
@@ -754,24 +754,31 @@ class DecelerationScenario:
         return self.t0 + self.v0 / self.decel
 
 
+def deceleration_log(s, seed):
+    """``(t, true speed, speed log, accelerometer)`` of the scenario ``s``, the noise seeded."""
+    rng = np.random.default_rng([seed, 3])
+    t = np.arange(s.seconds) * s.T
+    truth = np.where(t < s.t0, s.v0, np.maximum(s.v0 - s.decel * (t - s.t0), 0.0))
+    accel = np.where((t >= s.t0) & (t < s.t_stop), -s.decel, 0.0)
+    return t, truth, truth + rng.normal(0, s.sigma_v, len(t)), accel + rng.normal(0, s.sigma_a, len(t))
+
+
 def ls_frontend(scenario=None, *, seed, params=None):
     """The patent's four curves on the deceleration scenario: ``{seed, scenario, params, rows, series}``."""
     from kfpga.model import lsfront as ls
 
     s = DecelerationScenario() if scenario is None else scenario
     params = ls.LSFrontParams(T=s.T, r=s.sigma_v ** 2) if params is None else params
-    rng = np.random.default_rng([seed, 3])
-    t = np.arange(s.seconds) * s.T
-    truth = np.where(t < s.t0, s.v0, np.maximum(s.v0 - s.decel * (t - s.t0), 0.0))
-    accel = np.where((t >= s.t0) & (t < s.t_stop), -s.decel, 0.0)
-    v = truth + rng.normal(0, s.sigma_v, len(t))
-    a = accel + rng.normal(0, s.sigma_a, len(t))
+    t, truth, v, a = deceleration_log(s, seed)
     fed = ls.lsfront(v, params)
+    fixed = ls_frontend_fixed(v, params)
     curves = {
         "LS-fed Kalman (the patent)": fed["velocity"],
         "Kalman, velocity and acceleration observed": ls.kalman_va(v, params, a=a, r_a=s.sigma_a ** 2)["velocity"],
         "Kalman, velocity only": ls.kalman_va(v, params)["velocity"],
         f"moving average ({s.window} samples)": ls.moving_average(v, s.window),
+        SWITCHED: fixed.pop("float"),
+        BIT_ACCURATE: fixed.pop("fixed"),
     }
     cruise = (t >= 50) & (t < s.t0)
     ramp = (t >= s.t0 + 20) & (t < s.t_stop - 10)
@@ -795,8 +802,38 @@ def ls_frontend(scenario=None, *, seed, params=None):
     windows = np.bincount(fed["Ns"], minlength=max(params.windows) + 1)
     return {"seed": seed, "scenario": {k: getattr(s, k) for k in s.__dataclass_fields__},
             "params": {"T": params.T, "q": params.q, "r": params.r, "table": [list(r) for r in params.table]},
-            "rows": rows, "windows": {int(n): int(c) for n, c in enumerate(windows) if c},
+            "rows": rows, "windows": {int(n): int(c) for n, c in enumerate(windows) if c}, "fixed": fixed,
             "series": {"t": t, "truth": truth, "raw": v, **curves, "Ns": fed["Ns"]}}
+
+
+#: The rows of the front end's fixed-point form: in float, and in the core's integers.
+SWITCHED = "LS-fed, a steady-state gain per mode (float)"
+BIT_ACCURATE = "LS-fed, bit-accurate (the core's integers)"
+
+
+def ls_frontend_fixed(v, params):
+    """The front end in the core's integers on the speed log ``v`` (m/s, ADC codes of
+    ``params.lsb``) and the same switched steady-state filter in float: both estimates (m/s),
+    their distance, the formats, the overflowed samples and the samples whose window differs."""
+    from kfpga.config import FilterConfig
+    from kfpga.fixedmodel import FixedModel
+    from kfpga.model import lsfront as ls
+    from kfpga.scenarios import adc_codes
+
+    config = FilterConfig(filter="ls-frontend", params=params)
+    codes = adc_codes(np.asarray(v) / params.lsb)
+    run = FixedModel(config).run(codes)
+    ref = ls.switched(codes, params)
+    fixed = run.outputs["velocity"] * config.formats["x1"].lsb * params.lsb
+    flt = ref["velocity"] * params.lsb
+    diff = fixed - flt
+    accel = (run.outputs["accel"] * config.formats["x2"].lsb - ref["accel"]) * params.lsb / params.T
+    return {"fixed": fixed, "float": flt, "formats": {k: str(f) for k, f in config.formats.items()},
+            "max_from_float": float(np.max(np.abs(diff))), "rms_from_float": float(np.sqrt(np.mean(diff ** 2))),
+            "accel_max_from_float": float(np.max(np.abs(accel))), "overflows": int(run.overflow.sum()),
+            "window_differs": int(np.sum(run.outputs["ns"] != ref["ns"])), "samples": len(codes),
+            "gains": {("m = 1" if n == 0 else f"Ns = {n}"): [[float(g) for g in row] for row in k]
+                      for n, k in ls.mode_gains(params).items()}}
 
 
 def ls_frontend_table(result):
@@ -805,21 +842,32 @@ def ls_frontend_table(result):
     lines = [f"seed {result['seed']}: {s['v0']:g} m/s, decelerating at {s['decel']:g} m/s^2 from {s['t0']:g} s to a stop "
              f"at {s['t0'] + s['v0'] / s['decel']:g} s; speed log noise {s['sigma_v']:g} m/s, accelerometer "
              f"{s['sigma_a']:g} m/s^2 (the both-observed filter only); windows Ns: {table}", "",
-             f"{'filter':<44} {'RMSE cruise':>11} {'RMSE stopped':>12} {'RMSE ramp':>10} {'onset (s)':>9} {'lag (s)':>8} "
+             f"{'filter':<46} {'RMSE cruise':>11} {'RMSE stopped':>12} {'RMSE ramp':>10} {'onset (s)':>9} {'lag (s)':>8} "
              f"{'undershoot':>10}"]
     for r in result["rows"]:
         def fmt(value, spec):
             return "" if value is None else format(value, spec)
-        lines.append(f"{r['filter']:<44} {r['rmse_cruise']:>11.4f} {r['rmse_stopped']:>12.4f} {r['rmse_ramp']:>10.4f} "
+        lines.append(f"{r['filter']:<46} {r['rmse_cruise']:>11.4f} {r['rmse_stopped']:>12.4f} {r['rmse_ramp']:>10.4f} "
                      f"{fmt(r['onset_delay_s'], '.0f'):>9} {fmt(r['lag_s'], '.2f'):>8} {fmt(r['undershoot'], '.4f'):>10}")
     used = ", ".join(f"{n}: {c}" for n, c in result["windows"].items())
     lines += ["", "RMSE in m/s: cruise from 50 s to the deceleration, stopped from 100 s after the stop, ramp inside the "
               f"deceleration; onset: how much later than the truth the estimate is {s['drop']:g} m/s below the cruise "
               f"speed; lag: the mean error in the ramp over the deceleration; undershoot: below zero after the stop, the "
               f"error averaged over {s['average']} samples (m/s). Samples per window Ns (0: raw velocity, m = 1): {used}",
-              "",
+              "", ls_frontend_fixed_text(result["fixed"]), "",
               "against the patent:"] + [f"  {line}" for line in ls_frontend_findings(result)]
     return "\n".join(lines)
+
+
+def ls_frontend_fixed_text(fixed):
+    gains = "; ".join(f"{mode}: K = {k}".replace("], [", "; ") for mode, k in
+                      ((m, [[round(g, 4) for g in row] for row in k]) for m, k in fixed["gains"].items()))
+    return (f"fixed point (the core's integers; formats {', '.join(f'{k} {v}' for k, v in fixed['formats'].items())}): "
+            f"the running sums exact, the slope one product by 2^s/D per window, the line's end value S0/n + slope "
+            f"(n-1)/2; at most {fixed['max_from_float']:.5f} m/s from the same filter in float "
+            f"({fixed['rms_from_float']:.5f} rms), the acceleration at most {fixed['accel_max_from_float']:.6f} m/s^2; "
+            f"{fixed['overflows']} overflows, the window different from float's in {fixed['window_differs']} of "
+            f"{fixed['samples']} samples. Its steady-state gains (velocity, acceleration per sample) per mode: {gains}.")
 
 
 def ls_frontend_findings(result):
@@ -828,6 +876,7 @@ def ls_frontend_findings(result):
     both = rows["Kalman, velocity and acceleration observed"]
     vonly = rows["Kalman, velocity only"]
     mean = next(r for n, r in rows.items() if n.startswith("moving average"))
+    sw = rows[SWITCHED]
     quiet = fed["rmse_cruise"] < min(vonly["rmse_cruise"], mean["rmse_cruise"])
     quick = abs(fed["lag_s"]) < abs(mean["lag_s"])
     at_changes = fed["onset_delay_s"] <= vonly["onset_delay_s"] and fed["undershoot"] <= vonly["undershoot"]
@@ -847,6 +896,11 @@ def ls_frontend_findings(result):
         f"close to the filter that observes both (its fig. 4, curve x1): RMSE in the ramp {fed['rmse_ramp']:.4f} against "
         f"{both['rmse_ramp']:.4f} m/s, at constant speed {fed['rmse_cruise']:.4f} against {both['rmse_cruise']:.4f}; "
         "without an accelerometer.",
+        f"its fixed-point form (a steady-state gain for each mode, switched as the window changes): in float, RMSE "
+        f"{sw['rmse_cruise']:.4f} m/s at constant speed and {sw['rmse_ramp']:.4f} in the ramp, an undershoot of "
+        f"{sw['undershoot']:.3f} m/s (the patent's time-varying filter: {fed['rmse_cruise']:.4f}, {fed['rmse_ramp']:.4f}, "
+        f"{fed['undershoot']:.3f}); in the core's integers at most {result['fixed']['max_from_float']:.4f} m/s from "
+        "that float filter.",
         "the patent gives curves, not figures; the scenario's numbers (speed, rate, noise) are this code's own.",
     ]
 
@@ -864,8 +918,9 @@ def ls_frontend_plot(result, path):
     a.plot(t, s["raw"], ".", ms=1.5, color="0.7", label="speed log")
     a.plot(t, s["truth"], "k--", lw=0.8, label="true speed")
     for name in names:
-        a.plot(t, s[name], lw=1.0, label=name)
-        b.plot(t, s[name] - s["truth"], lw=0.8, label=name)
+        style = "--" if name == BIT_ACCURATE else "-"  # on top of its float form
+        a.plot(t, s[name], style, lw=1.0, label=name)
+        b.plot(t, s[name] - s["truth"], style, lw=0.8, label=name)
     a.set(title=f"a ship decelerating to a stop (seed {result['seed']})", ylabel="speed (m/s)")
     b.set(title="estimate - true speed", xlabel="time (s)", ylabel="error (m/s)", ylim=(-0.3, 0.3))
     a.legend(loc="upper right", fontsize=8)

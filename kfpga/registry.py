@@ -17,6 +17,7 @@ FILTERS = {
     "alpha-beta": "kfpga.model.alphabeta",
     "53h": "kfpga.model.tukey53h",
     "roll": "kfpga.model.roll",
+    "ls-frontend": "kfpga.model.lsfront",
 }
 #: The paper's filter, used when a config or command names none.
 DEFAULT = "kalman2"

@@ -68,10 +68,13 @@ class Point:
 
 @dataclass(frozen=True)
 class Output:
-    """An output field: a CSV column, a payload field of the core, a scoreboard field."""
+    """An output field: a CSV column, a payload field of the core, a scoreboard field.
+
+    ``point``: the quantisation point it is written in, or a structural
+    :class:`~kfpga.fixed.QFormat` (a count, a mode: not a configurable point)."""
 
     name: str
-    point: str
+    point: object
     description: str
 
 

@@ -32,8 +32,9 @@ async def core_bit_exact(dut):
     """
     p = sim_params()
     tb = CoreTB(dut, p)
-    n = int(p.get("samples", 2000))
-    codes = stress_codes(p["seed"], n)
+    # ``codes``: the first input's samples (a filter's own signal), else the stress signal
+    codes = np.array(p["codes"], dtype=np.int64) if "codes" in p else stress_codes(p["seed"], int(p.get("samples", 2000)))
+    n = len(codes)
     rng = np.random.default_rng(p["seed"] + 2)
     count = p.get("channels", 1)
     if p.get("order") == "round-robin":  # channels in turn: what a C-slow core takes at full rate

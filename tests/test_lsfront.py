@@ -6,9 +6,11 @@ import math
 
 import numpy as np
 import pytest
+from simulators import need
 
 from kfpga.cli import main
 from kfpga.model import lsfront as ls
+from kfpga.sim.runner import SIMULATORS, build, run
 
 
 @pytest.mark.parametrize("n", [3, 5, 12, 30])
@@ -69,4 +71,145 @@ def test_evaluate_ls_frontend_cli(tmp_path, capsys, seed):
     raw = rows["speed log (raw)"]
     assert fed["rmse_cruise"] < vonly["rmse_cruise"] < raw["rmse_cruise"]  # the patent's noise suppression
     assert abs(fed["lag_s"]) < mean["lag_s"]  # and a smaller lag than the moving average's
-    assert sum(result["windows"].values()) == result["scenario"]["seconds"] and len(result["findings"]) == 4
+    assert sum(result["windows"].values()) == result["scenario"]["seconds"] and len(result["findings"]) == 5
+
+
+# -- the bit-accurate front end --------------------------------------------------------------------
+
+
+def _fixed(params=None, **formats):
+    from kfpga.config import FilterConfig
+
+    return FilterConfig(filter="ls-frontend", params=params or ls.LSFrontParams(), formats=formats)
+
+
+def _speed_log(rng, n, params):
+    """A ship's speed (m/s) in codes, with manoeuvres and the log's noise."""
+    accel = np.repeat(rng.normal(0, 0.03, n // 50 + 1), 50)[:n]
+    v = 5.0 + np.cumsum(accel) * params.T + rng.normal(0, np.sqrt(params.r), n)
+    return np.clip(np.round(v / params.lsb), -32768, 32767).astype(np.int64)
+
+
+def test_running_sums_are_the_windows_exact_sums(seed):
+    """The state's S0 and S1 of every window after each sample: the sums over the last n codes
+    (zeros before the first), computed here directly."""
+    from kfpga.fixedmodel import FixedModel
+
+    rng = np.random.default_rng(seed)
+    config = _fixed()
+    codes = rng.integers(-32768, 32768, 80)
+    codes[40:50] = 32767  # the extremes, where a narrow sum would wrap
+    codes[60:70] = -32768
+    model, state = FixedModel(config), None
+    padded = np.r_[np.zeros(64, dtype=np.int64), codes]
+    for i, code in enumerate(codes):
+        state = model.run(np.array([code]), state=state).state
+        for n in config.params.windows:
+            window = padded[64 + i + 1 - n:64 + i + 1].astype(object)
+            assert int(state.values[f"s0_{n}"]) == sum(window)
+            assert int(state.values[f"s1_{n}"]) == sum(k * v for k, v in enumerate(window))
+
+
+def test_fit_is_polyfit_within_its_roundings(seed):
+    """The observations of a full window in the model's integers (the stage function ``fit`` on
+    :class:`~kfpga.ops.IntOps`): numpy's least-squares line at the newest sample and its slope,
+    within the rounding of the points b and fv and of the constants 2^s/D and 2^t/n."""
+    from kfpga.ops import IntOps
+
+    rng = np.random.default_rng(seed)
+    params = ls.LSFrontParams()
+    config = _fixed(params)
+    codes = _speed_log(rng, 200, params)
+    codes[100:130] = rng.integers(-32768, 32768, 30)  # any codes, the extremes of the fit
+    for n in params.windows:
+        for end in range(n, len(codes), 7):
+            window = [int(c) for c in codes[end - n:end]]
+            ops = IntOps(config.formats)
+            k = ops.constants(config.constants("steady"))
+            f0, f1 = ls.sum_formats(max(params.windows))
+            # the window in use holds its sums; the others (not read) anything
+            sums = {m: (ops.input(sum(window), f0), ops.input(sum(i * v for i, v in enumerate(window)), f1))
+                    if m == n else (ops.input(0, f0), ops.input(0, f1)) for m in params.windows}
+            ns = ops.input(n, ls.count_format(params))
+            fv, b = ls.fit(ops, k, sums, ns, False, ops.input(window[-1], "fv"))
+            slope, intercept = np.polyfit(np.arange(n), np.array(window, dtype=float), 1)
+            lsb_b, lsb_fv = config.formats["b"].lsb, config.formats["fv"].lsb
+            assert not any(flag for _, flag in ops.flags)
+            assert abs(b.raw * lsb_b - slope) <= lsb_b / 2 + abs(slope) * 2.0 ** -17 + 1e-9
+            end_value = intercept + (n - 1) * slope
+            assert abs(fv.raw * lsb_fv - end_value) <= (lsb_fv / 2 + (n - 1) / 2 * (lsb_b / 2 + abs(slope) * 2.0 ** -17)
+                                                        + abs(sum(window)) / n * 2.0 ** -17 + 1e-9)
+
+
+def test_mode_gains_are_scipys_riccati_solution():
+    """Each mode's steady-state gain against scipy's solver of the same discrete Riccati equation."""
+    from scipy.linalg import solve_discrete_are
+
+    params = ls.LSFrontParams()
+    gains = ls.mode_gains(params)
+    for mode, gain in gains.items():
+        model = ls.code_model(params, 1 if mode == 0 else 2, mode or None)
+        f, gqg, h, r = model.arrays()
+        p = solve_discrete_are(f.T, h.T, gqg, r)
+        k = p @ h.T @ np.linalg.inv(h @ p @ h.T + r)
+        np.testing.assert_allclose(gain[:, :k.shape[1]], k, rtol=1e-7, atol=1e-12)
+    assert not gains[0][:, 1].any()  # m = 1: the slope column unused
+
+
+def test_switched_filter_settles_onto_the_time_varying_one(seed):
+    """With one window, once the time-varying filter's gain has settled, the switched steady-state
+    filter (the fixed-point form's float reference) gives its estimates: the two are the same
+    filter past the start (the codes' rounding of the speed aside)."""
+    rng = np.random.default_rng(seed)
+    params = ls.LSFrontParams(table=((math.inf, 10),))
+    codes = _speed_log(rng, 3000, params)
+    ref = ls.switched(codes, params)
+    tv = ls.lsfront(codes * params.lsb, params)
+    assert (ref["ns"][9:] == 10).all() and (ref["ns"][:9] == 0).all()
+    assert np.max(np.abs(ref["velocity"][2000:] * params.lsb - tv["velocity"][2000:])) < 2e-4
+
+
+def test_bit_accurate_front_end_follows_its_float_form(seed):
+    """The model's integers against the switched filter in float: far within the speed log's
+    noise, the same window nearly everywhere, no overflow on a ship's speeds."""
+    from kfpga.fixedmodel import FixedModel
+
+    rng = np.random.default_rng(seed)
+    config = _fixed()
+    params = config.params
+    codes = _speed_log(rng, 4000, params)
+    run = FixedModel(config).run(codes)
+    ref = ls.switched(codes, params)
+    velocity = run.outputs["velocity"] * config.formats["x1"].lsb
+    assert not run.overflow.any()
+    assert np.max(np.abs(velocity - ref["velocity"])) < 5.0  # codes (mm/s), against a noise of 100
+    assert np.mean(run.outputs["ns"] == ref["ns"]) > 0.99
+
+
+def test_window_longer_than_the_limit_is_refused():
+    with pytest.raises(ValueError, match=f"Ns must be at most {ls.MAX_WINDOW}"):
+        ls.LSFrontParams(table=((math.inf, ls.MAX_WINDOW + 1),))
+
+
+@pytest.mark.cosim
+@pytest.mark.parametrize("simulator", SIMULATORS)
+def test_core_is_bit_exact_through_a_deceleration(simulator, seed):
+    """The generated Verilog of the front end and its filter on the patent's scenario (400 s: the
+    cruise, the deceleration, the stop), with random valid/ready: the raw velocity at the start
+    (m = 1) and every window of the table are used, and every output is the model's."""
+    from kfpga.evaluation import DecelerationScenario, deceleration_log
+    from kfpga.fixedmodel import FixedModel
+    from kfpga.scenarios import adc_codes
+
+    need(simulator)
+    config = _fixed()
+    _, _, v, _ = deceleration_log(DecelerationScenario(seconds=400), seed)
+    codes = adc_codes(v / config.params.lsb)
+    used = set(FixedModel(config).run(codes).outputs["ns"].tolist())
+    assert used == {0, *config.params.windows}, used
+    result = run(build(simulator, "core", config=config, variant="steady", channels=1), "test_core",
+                 testcase="core_bit_exact",
+                 params={"variant": "steady", "seed": seed, "codes": codes.tolist(), "samples": len(codes), "channels": 1,
+                         "p_idle": 0.2, "p_ready": 0.7, "config_toml": config.to_toml()}, tag="lsfront-deceleration")
+    assert result["mismatches"] == 0 and result["ok"], result.get("first_mismatches")
+    assert result["samples"] == len(codes)
