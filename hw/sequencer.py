@@ -13,7 +13,8 @@ Each operation takes three cycles, each with at most one carry chain, one multip
 shifter between registers (so that it meets 50 MHz on the -8 part): READ (the instruction is in
 the program memory's read register: its operands are addressed, its operation and its target
 format's constants are registered), EXEC (the operands are read and the result computed), WRITE
-(the result is written). A requantisation takes two more (the shift, then the saturation), a
+(the result is written). A requantisation takes two more (its value and rounding addend are
+registered in EXEC; then their sum shifted, a carry chain into a shifter; then the saturation), a
 product one more (the multiplier's output is registered), a division and a square root their
 unit's latency and four more (to shift its operand, to start it, to bound its result, to sign
 it); an output copy has no WRITE.
@@ -181,6 +182,7 @@ class SequentialCore(Core):
         largest = max([abs(i.shift) for i in p.instructions] + [1])
         k_amount, k_right = Signal(range(largest + 1), name="k_amount"), Signal(name="k_right")
         k_half, k_fix = Signal(w + 1, name="k_half"), Signal(w + 1, name="k_fix")  # 2**(s-1), 2**s - 1
+        k_below = Signal(w + 1, name="k_below")  # 2**(s-1) - 1: half an LSB less one, so no adder picks it
         k_top, k_mask = Signal(w + 1, name="k_top"), Signal(w + 2, name="k_mask")  # 2**(width-1) - 1, 2**width - 1
         table = sorted({(i.shift, i.width) for i in p.instructions if i.op in ("rq", "div", "sqrt", "shl")})
 
@@ -192,6 +194,7 @@ class SequentialCore(Core):
                     with m.Case((sh & 0xFF) | width << 8):
                         m.d.sync += [k_amount.eq(abs(sh)), k_right.eq(sh > 0),
                                      k_half.eq(1 << (sh - 1) if sh > 0 else 0), k_fix.eq((1 << sh) - 1 if sh > 0 else 0),
+                                     k_below.eq((1 << (sh - 1)) - 1 if sh > 0 else 0),
                                      k_top.eq((1 << max(width - 1, 0)) - 1), k_mask.eq((1 << width) - 1)]
 
         # -- the units: each result goes to one register, written in the operation's last cycle --------
@@ -203,19 +206,28 @@ class SequentialCore(Core):
                            | Mux(op["abs"], Mux(a < 0, -a, a), 0) | Mux(op["lt"], a < b, 0)
                            | Mux(op["mux"], Mux(a != 0, b, c), 0) | Mux(op["shl"], a << k_amount, 0)
                            | Mux(op["move"], a, 0))
-        # rq in three steps: the rounding addend added; the shift; saturation or wrap-around
+        # rq: EXEC registers the value (in ``held``, free then) and its rounding addend; SHIFT adds
+        # them and shifts; SATURATE saturates or wraps around
         negative = a < 0
-        addend = Signal(signed(w + 2), name="rq_addend")
+        neg_r, bad_r = Signal(name="neg_r"), Signal(name="bad_r")
+        held = Signal(w, name="held")  # a unit's result; an rq's value
+        addend, addend_next = Signal(signed(w + 2), name="rq_addend"), Signal(signed(w + 2), name="rq_addend_next")
         with m.Switch(rounding):
             with m.Case(ROUNDINGS.index(Rounding.NEAREST)):
-                m.d.comb += addend.eq(k_half)
-            with m.Case(ROUNDINGS.index(Rounding.ROUND)):
-                m.d.comb += addend.eq(Mux(k_right, k_half - negative, 0))
+                m.d.comb += addend_next.eq(k_half)
+            # the addends of ROUND and CONVERGENT chosen between two registered constants, half an
+            # LSB and one less, by a bit of a: a multiplexer, not a carry chain (k_half and k_below
+            # are 0 when nothing is shifted off)
+            with m.Case(ROUNDINGS.index(Rounding.ROUND)):  # half - 1 for a negative value
+                m.d.comb += addend_next.eq(Mux(negative, k_below, k_half))
             with m.Case(ROUNDINGS.index(Rounding.CONVERGENT)):  # the bit that becomes the LSB breaks a tie
-                m.d.comb += addend.eq(Mux(k_right, k_half - 1 + (a >> k_amount)[0], 0))
+                # bit s of a (s = k_amount) through the mask 2 k_half = 2**s: an AND and an OR tree,
+                # not a barrel shifter
+                m.d.comb += addend_next.eq(Mux((a & (k_half << 1)).any(), k_half, k_below))
             with m.Case(ROUNDINGS.index(Rounding.FIX)):
-                m.d.comb += addend.eq(Mux(negative, k_fix, 0))
+                m.d.comb += addend_next.eq(Mux(negative, k_fix, 0))
         summed = Signal(signed(w + 2), name="rq_sum")
+        m.d.comb += summed.eq(held.as_signed() + addend)
         moved = Signal(signed(w + 2), name="rq_moved")
         top = k_top.as_signed()
         kept = Signal(w + 2, name="rq_kept")  # the low width bits ...
@@ -223,8 +235,6 @@ class SequentialCore(Core):
         wrapped = (kept - ((kept & (k_top + 1)) << 1)).as_signed()  # ... as a signed width-bit value
         high, low = moved > top, moved < -top - 1
         # a division or a root: its operand prepared, the unit run, its result bounded
-        neg_r, bad_r = Signal(name="neg_r"), Signal(name="bad_r")
-        held = Signal(w, name="held")  # a unit's result
         magnitude = Signal(w, name="magnitude")  # a unit's operand before its shift
         unit_done, unit_value, unit_overflow = Const(1, 1), Const(0, 1), Const(0, 1)
         start = Signal(name="unit_start")
@@ -301,7 +311,8 @@ class SequentialCore(Core):
                 read_instruction()
                 m.next = "EXEC"
             with m.State("EXEC"):  # the operands are here
-                m.d.sync += [result.eq(alu), flag.eq(0), summed.eq(a + addend), mul_a.eq(a[:wa]), mul_b.eq(b[:wb])]
+                m.d.sync += [result.eq(alu), flag.eq(0), mul_a.eq(a[:wa]), mul_b.eq(b[:wb]), held.eq(a),
+                             addend.eq(addend_next)]
                 # a division's dividend is |a|, a root's radicand a (0 if negative): shifted in PREP
                 m.d.sync += [magnitude.eq(Mux(negative, Mux(op["div"], -a, 0), a)), neg_r.eq(negative),
                              bad_r.eq(Mux(op["div"], b <= 0, negative))]

@@ -239,12 +239,13 @@ def test_ecp5_place_and_route_agrees_the_loop_is_short(capsys):
 
 
 @pytest.mark.slow
-def test_the_roll_predictors_sequential_core_meets_its_goals(capsys):
-    """The square-root predictor on the sequential core: within one 50 MHz cycle on the -8 part
-    (its goal: an update every half second needs no more), its multiplier 2 x 2 blocks, the
-    program and registers in block memory."""
-    assert main(["resources", "--filter", "roll", "--json", "--quiet"]) == 0
+@pytest.mark.parametrize(("name", "mul18", "words"), [("roll", 4, 64 * 54), ("ls-frontend", 2, 256 * 58)])
+def test_the_sequential_cores_meet_their_goals(capsys, name, mul18, words):
+    """The square-root roll predictor and the least-squares front end on the sequential core:
+    within one 50 MHz cycle on the -8 part (their goal: an update every half second or every
+    second needs no more), the multiplier's blocks, the program and registers in block memory."""
+    assert main(["resources", "--filter", name, "--json", "--quiet"]) == 0
     r = json.loads(capsys.readouterr().out)
     assert r["all_goals_met"], {k: m for k, m in r["goals_met"].items() if not m}
     assert r["fmax_mhz_estimate"] >= 50 and r["whole_design"]["fmax_mhz_estimate"] >= 50
-    assert r["mul18"] == 4 and r["memory_bits"] > 3 * 64 * 54  # three copies of the register file, and the program
+    assert r["mul18"] == mul18 and r["memory_bits"] > 3 * words  # three copies of the register file, and the program
