@@ -467,9 +467,13 @@ def run(built, *, params, samples, on_progress=None, tag=None, timeout_s=None):
 
 def cycle_budget(built, records, samples):
     """System cycles a run may take before it is stopped: generous, as a conversion with one
-    read takes 230 system cycles, six reads 380 (for six estimates)."""
+    read takes 230 system cycles, six reads 380 (for six estimates); a core slower than that
+    (the sequential core: hundreds of cycles an update) paces the reads, and gets twice its own."""
+    from kfpga.hw.generate import figures_only
+
     per_sample = 600 if len(records.adc_channels) > 1 else 300
-    return per_sample * samples + 20000
+    core = figures_only(built.config.spec.make_core(built.config, built.variant, channels=6 if built.six else 1))
+    return max(per_sample, 2 * core.cycles_per_update + 60) * samples + 20000
 
 
 class _AdcCounts(NamedTuple):

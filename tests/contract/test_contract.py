@@ -11,7 +11,8 @@ A new filter gets all of it by registering (``kfpga/registry.py``):
 4. the declared ``latency`` and ``cycles_per_update`` are the measured ones;
 5. the generated Verilog parses as Verilog-2001 and lints;
 6. cocotb on the generated Verilog is bit-exact, briefly, on Verilator and on Icarus, and the
-   state holds while the core waits (the first sample 0..3 idle cycles after a reset).
+   state holds while the core waits (the first sample 0..3 idle cycles after a reset);
+7. the whole design (clock divider, ADS8364 controller, core) is bit-exact on both simulators.
 
 A core that takes many cycles per update (the sequential core of a slow filter) runs fewer
 samples in the simulations: as many as :data:`CYCLE_BUDGET` cycles take, at least
@@ -191,3 +192,20 @@ def test_state_holds_while_the_core_waits(name, variant, simulator, seed):
                  params={"variant": variant, "seed": seed, "samples": 160, "channels": 3,
                          "config_toml": config.to_toml()}, tag=f"contract-idle-{name}-{variant}")
     assert result["ok"] and result["compared"] == 160
+
+
+@pytest.mark.cosim
+@pytest.mark.parametrize("simulator", SIMULATORS)
+@pytest.mark.parametrize(("name", "variant"), HW_CASES)
+def test_whole_design_is_bit_exact(name, variant, simulator, seed):
+    """The core on the board: clock divider, ADS8364 controller and core, with the Verilog ADC
+    model checking every timing figure; a core slower than the ADC paces its reads."""
+    from kfpga.sim import system
+
+    need(simulator)
+    config = FilterConfig(filter=name)
+    n = samples_for(config, variant, 400)
+    result = system.run(system.build(simulator, config=config, variant=variant), params={"seed": seed}, samples=n,
+                        tag=f"contract-{name}-{variant}")
+    assert result["mismatches"] == 0 and result["ok"], result.get("first_mismatches")
+    assert result["samples"] == n and result["outputs"] == n and result["adc_errors"] == 0
