@@ -386,10 +386,31 @@ def handshake_twin(program, width=8):
         if kind not in seen and ins.op not in ("out", "move"):
             seen.add(kind)
             kept.append(ins)
-    first_state = next(iter(program.state_addrs))
     kept.append(next(i for i in program.instructions if i.op == "out"))
-    kept.append(Instruction("move", program.state_base, kept[0].dst))
+    # the registers the kept operations read and write, renumbered from 0 (the register file then
+    # as small as they need: its contents, three copies, are state the solver carries), then one
+    # state per channel block
+    plain = sorted({a for ins in kept for a in (ins.a, ins.b, ins.c, *([] if ins.op == "out" else [ins.dst]))
+                    if a < program.state_base} | set(program.sample_addrs.values()))
+    where = {a: j for j, a in enumerate(plain)}
+    state_bits = 1
+    region = 1 << (state_bits + program.channel_bits)
+    base = 1 << max(_bits(len(plain)), state_bits + program.channel_bits)
+
+    def moved(a):
+        return base | (a - program.state_base) >> program.state_bits << state_bits if a >= program.state_base else where[a]
+
+    kept = [dataclasses.replace(ins, dst=ins.dst if ins.op == "out" else moved(ins.dst), a=moved(ins.a), b=moved(ins.b),
+                                c=moved(ins.c)) for ins in kept]
+    kept.append(Instruction("move", base, kept[0].dst))
     mask = (1 << width) - 1
-    return dataclasses.replace(program, instructions=tuple(kept), init=tuple(v & mask for v in program.init),
-                               state_addrs={first_state: program.state_base}, width=width, mul_widths=(4, 4),
-                               dividend_bits=6, divisor_bits=3, quotient_bits=3, radicand_bits=4, state_bits=1)
+    init = [0] * (base + region)
+    for a, j in where.items():
+        init[j] = program.init[a] & mask
+    for c in range(1 << program.channel_bits):
+        init[base | c << state_bits] = program.init[program.state_base | c << program.state_bits] & mask
+    first_state = next(iter(program.state_addrs))
+    return dataclasses.replace(program, instructions=tuple(kept), init=tuple(init), state_addrs={first_state: base},
+                               sample_addrs={n: where[a] for n, a in program.sample_addrs.items()}, width=width,
+                               mul_widths=(4, 4), dividend_bits=6, divisor_bits=3, quotient_bits=3, radicand_bits=4,
+                               state_base=base, state_bits=state_bits, depth=base + region)

@@ -42,7 +42,8 @@ from kfpga.params import matrix, number
 from kfpga.spec import Constant, FilterSpec, Output, Point, Variant
 
 __all__ = ["RollParams", "PAPER_P0", "transition", "predict", "table1", "synthetic_roll", "MIN_SAMPLES", "SPEC",
-           "sqrt_update", "plain_update", "unit_matrices", "reference"]
+           "sqrt_update", "plain_update", "pair_update", "PAIR", "PHASE", "FILTER_STATE", "unit_matrices", "reference",
+           "predict_fixed", "predict_same_start", "covariance_ok", "word_sweep", "word_config"]
 
 #: The paper's P0 (its equation 23): all entries 10, rank 1.
 PAPER_P0 = ((10.0, 10.0, 10.0), (10.0, 10.0, 10.0), (10.0, 10.0, 10.0))
@@ -211,11 +212,13 @@ def synthetic_roll(n=480, seed=1, *, T=0.5, noise=0.02):
     return t, clean + rng.normal(0, noise, n), clean
 
 
-# -- the bit-accurate predictor: one filter of the pair, in ADC codes ------------------------------------------
+# -- the bit-accurate predictor: the pair of filters, in ADC codes ---------------------------------------------
 #
-# One registered filter is one of the two: it takes every other sample (the core's two channels
-# are the pair, fed alternately), and after each sample gives its prediction of its next one.
-# The state is in codes and per filter step (tau = 2 T): x1 the angle, x2 the rate times tau,
+# The registered filter is the combined interval predictor: its state holds both filters (``a_``:
+# the even samples', ``b_``: the odd samples') and the phase; each sample goes to the filter whose
+# turn it is (its state selected, updated once, written back; the other filter's state kept), and
+# the output is that filter's prediction of its next sample, 2 samples ahead. One filter's
+# state is in codes and per filter step (tau = 2 T): x1 the angle, x2 the rate times tau,
 # x3 the acceleration times tau^2, so the transition is A = [[1, 1, 1/2], [0, 1, 1], [0, 0, 1]]
 # whatever T is (its products are shifts), and the noises are Q = q diag(1, tau^2, tau^4) / lsb^2,
 # R / lsb^2. Each filter starts from x = 0 and the prediction covariance A P0 A^T + Q (the paper's
@@ -351,11 +354,44 @@ def plain_update(ops, k, x, u):
     return state, {"pred": xp[0], "rate": xp[1], "accel": xp[2]}
 
 
+#: The format of the phase: 0 when the next sample is filter a's, 1 when it is filter b's.
+PHASE = QFormat(2, 0)
+#: The two filters of the pair: the even samples' and the odd samples'.
+PAIR = ("a", "b")
+
+
+def pair_update(update, names):
+    """The interval predictor's update from one filter's ``update`` over its state ``names``:
+    the filter whose turn it is takes the sample, the other keeps its state."""
+
+    def step(ops, k, x, u):
+        odd = ops.gt(x["phase"], k["zero"])                                           # filter b's turn
+        mine = {n: ops.select(odd, x[f"b_{n}"], x[f"a_{n}"]) for n in names}
+        nxt, outs = update(ops, k, mine, u)
+        state = {"phase": ops.select(odd, k["zero"], k["one"])}
+        for n in names:
+            state[f"a_{n}"] = ops.select(odd, x[f"a_{n}"], nxt[n])
+            state[f"b_{n}"] = ops.select(odd, nxt[n], x[f"b_{n}"])
+        return state, outs
+
+    step.__name__ = f"pair_{update.__name__}"
+    step.__doc__ = f"The interval predictor's update: {update.__doc__}"
+    return step
+
+
+def _paired(state):
+    return (*((f"{f}_{n}", p) for f in PAIR for n, p in state), ("phase", PHASE))
+
+
 # -- the spec ----------------------------------------------------------------------------------------------
+
+def _phase_constants():
+    return {"zero": Constant(0.0, PHASE, "0"), "one": Constant(1.0, PHASE, "1")}
+
 
 def _sqrt_constants(params):
     _, q, r, _ = unit_matrices(params)
-    out = {"R": Constant(r, "s", "R"), "sqrt_r": Constant(math.sqrt(r), "rs", "sqrt(R)"),
+    out = {**_phase_constants(), "R": Constant(r, "s", "R"), "sqrt_r": Constant(math.sqrt(r), "rs", "sqrt(R)"),
            "sqrt_s": Constant(math.sqrt(params.s), "sqs", "sqrt(s)")}
     out.update({f"g{i + 1}": Constant(math.sqrt(q[i, i]), "d", f"sqrt(Q)[{i}]") for i in range(3)})
     return out
@@ -363,7 +399,7 @@ def _sqrt_constants(params):
 
 def _plain_constants(params):
     _, q, r, _ = unit_matrices(params)
-    out = {"R": Constant(r, "ps", "R"), "fade": Constant(params.s, "fade", "s")}
+    out = {**_phase_constants(), "R": Constant(r, "ps", "R"), "fade": Constant(params.s, "fade", "s")}
     out.update({f"q{i + 1}": Constant(q[i, i], "p", f"Q[{i}]") for i in range(3)})
     return out
 
@@ -371,26 +407,34 @@ def _plain_constants(params):
 _TRI = ((0, 0), (1, 0), (2, 0), (1, 1), (2, 1), (2, 2))
 
 
+def _pair_initial(one):
+    return {**{f"{f}_{n}": v for f in PAIR for n, v in one.items()}, "phase": 0.0}
+
+
 def _sqrt_initial(params):
     d = np.linalg.cholesky(unit_matrices(params)[3])
-    return {"x1": 0.0, "x2": 0.0, "x3": 0.0, **{f"d{i + 1}{j + 1}": float(d[i, j]) for i, j in _TRI}}
+    return _pair_initial({"x1": 0.0, "x2": 0.0, "x3": 0.0, **{f"d{i + 1}{j + 1}": float(d[i, j]) for i, j in _TRI}})
 
 
 def _plain_initial(params):
     p = unit_matrices(params)[3]
-    return {"x1": 0.0, "x2": 0.0, "x3": 0.0, **{f"p{j + 1}{i + 1}": float(p[j, i]) for i, j in _TRI}}
+    return _pair_initial({"x1": 0.0, "x2": 0.0, "x3": 0.0, **{f"p{j + 1}{i + 1}": float(p[j, i]) for i, j in _TRI}})
 
 
 _X_STATE = (("x1", "x1"), ("x2", "x2"), ("x3", "x3"))
+#: One filter's state in each form.
+FILTER_STATE = {"sqrt": _X_STATE + tuple((f"d{i + 1}{j + 1}", "d") for i, j in _TRI),
+                "plain": _X_STATE + tuple((f"p{j + 1}{i + 1}", "p") for i, j in _TRI)}
 VARIANTS = {
     "sqrt": Variant("sqrt", "improved form, square-root covariance: Potter's update and a Givens time update",
-                    _X_STATE + tuple((f"d{i + 1}{j + 1}", "d") for i, j in _TRI), _sqrt_constants, _sqrt_initial,
-                    sqrt_update),
+                    _paired(FILTER_STATE["sqrt"]), _sqrt_constants, _sqrt_initial,
+                    pair_update(sqrt_update, [n for n, _ in FILTER_STATE["sqrt"]])),
     "plain": Variant("plain", "improved form with the covariance itself (model only: the yardstick of the "
                               "square-root form's word lengths)",
-                     _X_STATE + tuple((f"p{j + 1}{i + 1}", "p") for i, j in _TRI), _plain_constants, _plain_initial,
-                     plain_update, hardware=lambda params: "the plain covariance form is model-only: the core "
-                                                           "carries the square root (variant sqrt)"),
+                     _paired(FILTER_STATE["plain"]), _plain_constants, _plain_initial,
+                     pair_update(plain_update, [n for n, _ in FILTER_STATE["plain"]]),
+                     hardware=lambda params: "the plain covariance form is model-only: the core carries the square "
+                                             "root (variant sqrt)"),
 }
 
 POINTS = {p.name: p for p in (
@@ -418,23 +462,30 @@ def _points_for(params):
 
 
 def reference(params, variant, z):
-    """One filter of the pair in float, in its own units (codes, filter steps), from the start
-    the bit-accurate one has (x = 0, P- = A P0 A^T + Q): ``{"pred", "rate", "accel"}`` along the
-    last axis of ``z`` (codes). Both variants are the same filter in real arithmetic; this is the
-    plain form, written independently of the stage functions."""
+    """The interval predictor in float, in the filters' own units (codes, filter steps), each
+    filter of the pair on its own samples (even, odd) from the start the bit-accurate one has
+    (x = 0, P- = A P0 A^T + Q): ``{"pred", "rate", "accel"}`` along the last axis of ``z``
+    (codes), each sample's the prediction of the filter that took it. Both variants are the
+    same filter in real arithmetic; this is the plain form, written independently of the stage
+    functions."""
     a, q, r, p0 = unit_matrices(params)
     z = np.asarray(z, dtype=np.float64)
     out = {name: np.empty(z.shape) for name in ("pred", "rate", "accel")}
     for index in np.ndindex(z.shape[:-1]):
-        x, p = np.zeros(3), p0.copy()
-        for n, zn in enumerate(z[index]):
-            gain = p[:, 0] / (p[0, 0] + r)                  # K = P H^T / (H P H^T + R)
-            x = x + gain * (zn - x[0])                      # x = x + K (z - H x)
-            p = p - np.outer(gain, p[0, :])                 # P = (I - K H) P
-            x, p = a @ x, a @ (params.s * p) @ a.T + q      # x = A x, P = A (s P) A^T + Q
-            for name, value in zip(("pred", "rate", "accel"), x, strict=True):
-                out[name][(*index, n)] = value
+        for parity in (0, 1):
+            _one_filter(a, q, r, p0, params.s, z[index][parity::2], out, index, parity)
     return out
+
+
+def _one_filter(a, q, r, p0, fade, z, out, index, parity):
+    x, p = np.zeros(3), p0.copy()
+    for n, zn in enumerate(z):
+        gain = p[:, 0] / (p[0, 0] + r)                  # K = P H^T / (H P H^T + R)
+        x = x + gain * (zn - x[0])                      # x = x + K (z - H x)
+        p = p - np.outer(gain, p[0, :])                 # P = (I - K H) P
+        x, p = a @ x, a @ (fade * p) @ a.T + q          # x = A x, P = A (s P) A^T + Q
+        for name, value in zip(("pred", "rate", "accel"), x, strict=True):
+            out[name][(*index, 2 * n + parity)] = value
 
 
 def _stimulus(params):
@@ -478,7 +529,7 @@ def _random_params(rng):
                       lsb=float(rng.choice([0.01, 0.005, 0.02])))
 
 
-def _goals(config, variant, channels=2):
+def _goals(config, variant, channels=1):
     """The sequential core's: one multiplier of the widest product (its squares of D take 2 x 2
     embedded multipliers), the program and the registers in block memory, 5,000 logic cells for
     the units and their multiplexers; every path within one cycle of the 50 MHz system clock (an
@@ -487,26 +538,25 @@ def _goals(config, variant, channels=2):
 
 
 def _scenario(name, n, seed, params):
-    """A filter's own samples (every other one of the roll series), in codes; the truth of its
-    prediction at step k is the clean roll at step k + 1."""
+    """The synthetic roll series in codes (both scenarios); the truth of the prediction at
+    sample k is the clean roll at sample k + 2."""
     from kfpga.scenarios import adc_codes
 
     if name not in ("sine", "random-accel"):
         raise ValueError(f"scenario must be one of sine, random-accel, not {name!r}")
-    _, noisy, clean = synthetic_roll(2 * n + 2, seed, T=params.T)
-    truth = clean[2::2][:n] / params.lsb
-    return truth, adc_codes(noisy[0::2][:n] / params.lsb)
+    _, noisy, clean = synthetic_roll(n + 2, seed, T=params.T)
+    return clean[2:] / params.lsb, adc_codes(noisy[:n] / params.lsb)
 
 
 SPEC = FilterSpec(
     name="roll",
-    summary="ship-roll interval predictor (one filter of the pair): constant acceleration, improved form, "
-            "square-root covariance; predicts its next sample (1 s ahead)",
+    summary="ship-roll interval predictor: two constant-acceleration filters on alternate samples, improved form, "
+            "square-root covariance; each sample's prediction of the sample 2 ahead (1 s)",
     source="seeds/000: the combined interval Kalman predictor of ship roll",
     params=RollParams,
     points=POINTS,
     inputs=(("z", "the roll angle (a 16-bit ADC code, lsb degrees per code)"),),
-    outputs=(Output("pred", "x1", "the predicted roll angle of the filter's next sample"),
+    outputs=(Output("pred", "x1", "the predicted roll angle of the sample 2 ahead (the next of the filter that took this one)"),
              Output("rate", "x2", "the predicted roll rate times the filter step"),
              Output("accel", "x3", "the predicted roll acceleration times the filter step squared")),
     variants=VARIANTS,
@@ -541,18 +591,14 @@ def predict_same_start(z, params=None):
     and A P0 A^T + Q, on the ADC codes of ``z``): its predictions in degrees, aligned as
     :func:`predict`'s (``p[n]`` predicts ``z[n + 2]``)."""
     params = RollParams() if params is None else params
-    codes = _codes(z, params)
-    out = np.empty(len(codes))
-    for parity in (0, 1):
-        out[parity::2] = reference(params, "sqrt", codes[parity::2])["pred"] * params.lsb
-    return out
+    return reference(params, "sqrt", _codes(z, params))["pred"] * params.lsb
 
 
-def covariance_ok(variant, values):
-    """Whether the covariance of a filter's state (raw integers) is positive definite: for the
-    square-root form every diagonal entry of D above 0 (P = D D^T), for the plain form every
-    eigenvalue of P above 0."""
-    v = {k: int(np.asarray(x)) for k, x in values.items()}
+def covariance_ok(variant, values, prefix=""):
+    """Whether the covariance of a filter's state (raw integers; ``prefix`` names the filter of
+    the pair, ``"a_"`` or ``"b_"``) is positive definite: for the square-root form every diagonal
+    entry of D above 0 (P = D D^T), for the plain form every eigenvalue of P above 0."""
+    v = {k[len(prefix):]: int(np.asarray(x)) for k, x in values.items() if k.startswith(prefix)}
     if variant == "sqrt":
         return v["d11"] > 0 and v["d22"] > 0 and v["d33"] > 0
     p = np.array([[v["p11"], v["p12"], v["p13"]], [v["p12"], v["p22"], v["p23"]], [v["p13"], v["p23"], v["p33"]]],
@@ -563,31 +609,25 @@ def covariance_ok(variant, values):
 def predict_fixed(z, config, variant="sqrt", *, check=False):
     """The combined interval predictor in the bit-accurate model: ``(predictions in degrees,
     aligned as :func:`predict`'s, overflowed updates, updates whose covariance is not positive
-    definite)``; the last is counted only with ``check`` (one model call per sample)."""
+    definite)``; the last is counted only with ``check`` (one model call per sample, the
+    covariance of the filter that took it)."""
     from kfpga.fixedmodel import FixedModel
 
     params = config.params
     codes = _codes(z, params)
     model = FixedModel(config, variant=variant)
     lsb = config.formats["x1"].lsb * params.lsb
-    out = np.empty(len(codes))
-    overflowed = not_pd = 0
-    for parity in (0, 1):
-        part = codes[parity::2]
-        if not check:
-            result = model.run(part)
-            out[parity::2] = result.outputs["pred"] * lsb
-            overflowed += int(result.overflow.sum())
-            continue
-        state, preds = None, []
-        for code in part:
-            result = model.run(np.array([code]), state=state)
-            state = result.state
-            preds.append(int(result.outputs["pred"][0]))
-            overflowed += int(result.overflow[0])
-            not_pd += not covariance_ok(variant, state.values)
-        out[parity::2] = np.array(preds) * lsb
-    return out, overflowed, not_pd
+    if not check:
+        result = model.run(codes)
+        return result.outputs["pred"] * lsb, int(result.overflow.sum()), 0
+    state, preds, overflowed, not_pd = None, [], 0, 0
+    for n, code in enumerate(codes):
+        result = model.run(np.array([code]), state=state)
+        state = result.state
+        preds.append(int(result.outputs["pred"][0]))
+        overflowed += int(result.overflow[0])
+        not_pd += not covariance_ok(variant, state.values, f"{PAIR[n % 2]}_")
+    return np.array(preds) * lsb, overflowed, not_pd
 
 
 def word_config(base, variant, register_frac, operand_bits):

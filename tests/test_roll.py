@@ -1,13 +1,16 @@
-"""The ship-roll interval predictor of seeds/000, in float: its forms against each other and
-against an independent Kalman filter, the paper's data, the evaluation and its bad input."""
+"""The ship-roll interval predictor of seeds/000: in float, its forms against each other and
+against an independent Kalman filter, the paper's data, the evaluation and its bad input; in
+fixed point, against float, its word lengths, and its core in cocotb."""
 
 import json
 
 import numpy as np
 import pytest
+from simulators import need
 
 from kfpga.cli import main
 from kfpga.model import roll
+from kfpga.sim.runner import SIMULATORS, build, run
 
 
 def test_table1_is_the_papers():
@@ -176,3 +179,31 @@ def test_positive_definiteness_checks():
     identity = {"p11": 1, "p22": 1, "p33": 1, "p12": 0, "p13": 0, "p23": 0}
     assert roll.covariance_ok("plain", identity)
     assert not roll.covariance_ok("plain", {**identity, "p12": 2})  # eigenvalues 3, -1, 1
+
+
+@pytest.mark.cosim
+@pytest.mark.parametrize("simulator", SIMULATORS)
+def test_core_is_the_interval_predictor_in_cocotb(simulator, seed):
+    """The generated Verilog of the roll core on a roll series (the paper's table 1, then a
+    synthetic series), with random valid/ready: every output is the model's, which is the
+    combined interval predictor's prediction of the sample 2 ahead (``predict_fixed``)."""
+    from kfpga.config import FilterConfig
+    from kfpga.fixedmodel import FixedModel
+    from kfpga.scenarios import adc_codes
+
+    need(simulator)
+    config = FilterConfig(filter="roll")
+    _, table = roll.table1()
+    _, synthetic, _ = roll.synthetic_roll(90, seed)
+    z = np.r_[table, synthetic]
+    codes = adc_codes(z / config.params.lsb)
+    pred, overflowed, _ = roll.predict_fixed(z, config)
+    model = FixedModel(config).run(codes)
+    np.testing.assert_array_equal(model.outputs["pred"] * config.formats["x1"].lsb * config.params.lsb, pred)
+    assert overflowed == 0
+    result = run(build(simulator, "core", config=config, variant="sqrt", channels=1), "test_core",
+                 testcase="core_bit_exact",
+                 params={"variant": "sqrt", "seed": seed, "codes": codes.tolist(), "samples": len(codes), "channels": 1,
+                         "p_idle": 0.2, "p_ready": 0.7, "config_toml": config.to_toml()}, tag="roll-series")
+    assert result["mismatches"] == 0 and result["ok"], result.get("first_mismatches")
+    assert result["samples"] == len(codes)
