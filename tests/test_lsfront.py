@@ -6,11 +6,11 @@ import math
 
 import numpy as np
 import pytest
-from simulators import need
+from simulators import core_is_bit_exact_on
 
 from kfpga.cli import main
 from kfpga.model import lsfront as ls
-from kfpga.sim.runner import SIMULATORS, build, run
+from kfpga.sim.runner import SIMULATORS
 
 
 @pytest.mark.parametrize("n", [3, 5, 12, 30])
@@ -201,15 +201,9 @@ def test_core_is_bit_exact_through_a_deceleration(simulator, seed):
     from kfpga.fixedmodel import FixedModel
     from kfpga.scenarios import adc_codes
 
-    need(simulator)
     config = _fixed()
     _, _, v, _ = deceleration_log(DecelerationScenario(seconds=400), seed)
     codes = adc_codes(v / config.params.lsb)
     used = set(FixedModel(config).run(codes).outputs["ns"].tolist())
     assert used == {0, *config.params.windows}, used
-    result = run(build(simulator, "core", config=config, variant="steady", channels=1), "test_core",
-                 testcase="core_bit_exact",
-                 params={"variant": "steady", "seed": seed, "codes": codes.tolist(), "samples": len(codes), "channels": 1,
-                         "p_idle": 0.2, "p_ready": 0.7, "config_toml": config.to_toml()}, tag="lsfront-deceleration")
-    assert result["mismatches"] == 0 and result["ok"], result.get("first_mismatches")
-    assert result["samples"] == len(codes)
+    core_is_bit_exact_on(simulator, config, "steady", codes, seed, "lsfront-deceleration")

@@ -6,11 +6,11 @@ import json
 
 import numpy as np
 import pytest
-from simulators import need
+from simulators import core_is_bit_exact_on
 
 from kfpga.cli import main
 from kfpga.model import roll
-from kfpga.sim.runner import SIMULATORS, build, run
+from kfpga.sim.runner import SIMULATORS
 
 
 def test_table1_is_the_papers():
@@ -191,7 +191,6 @@ def test_core_is_the_interval_predictor_in_cocotb(simulator, seed):
     from kfpga.fixedmodel import FixedModel
     from kfpga.scenarios import adc_codes
 
-    need(simulator)
     config = FilterConfig(filter="roll")
     _, table = roll.table1()
     _, synthetic, _ = roll.synthetic_roll(90, seed)
@@ -201,9 +200,4 @@ def test_core_is_the_interval_predictor_in_cocotb(simulator, seed):
     model = FixedModel(config).run(codes)
     np.testing.assert_array_equal(model.outputs["pred"] * config.formats["x1"].lsb * config.params.lsb, pred)
     assert overflowed == 0
-    result = run(build(simulator, "core", config=config, variant="sqrt", channels=1), "test_core",
-                 testcase="core_bit_exact",
-                 params={"variant": "sqrt", "seed": seed, "codes": codes.tolist(), "samples": len(codes), "channels": 1,
-                         "p_idle": 0.2, "p_ready": 0.7, "config_toml": config.to_toml()}, tag="roll-series")
-    assert result["mismatches"] == 0 and result["ok"], result.get("first_mismatches")
-    assert result["samples"] == len(codes)
+    core_is_bit_exact_on(simulator, config, "sqrt", codes, seed, "roll-series")
