@@ -82,13 +82,18 @@ def blocks():
     # the other filters' cores on their core bench; a core whose formal harness is another
     # instance (a narrow 53H, the sequential core's handshake twin) has no property to kill with:
     # the mutation names cells of this instance
-    others = [(FilterConfig(filter="alpha-beta"), "steady", "alpha-beta core", 600, "alpha-beta steady core"),
+    # the alpha-beta core with v a bit narrower than its range: its write then saturates on its
+    # own on some stress samples (at the defaults no stress sample saturates v alone)
+    ab = FilterConfig(filter="alpha-beta")
+    ab = FilterConfig(filter="alpha-beta", formats={**ab.formats, "v": QFormat(16, ab.formats["v"].frac_bits)},
+                      check_ranges=False)
+    others = [(ab, "steady", "alpha-beta core", 600, None),
               (FilterConfig(filter="53h"), "online", "53h core", 600, None),
               (FilterConfig(filter="ls-frontend"), "steady", "sequential core (ls-frontend)", 120, None)]
     cores = [Block(name, "core", {"variant": variant, "channels": 1, "config": cfg},
                    (lambda cfg=cfg, variant=variant: cfg.spec.make_core(cfg, variant, channels=1)), "kfpga_core", "",
                    "test_core", {"variant": variant, "samples": samples, "p_idle": 0.2, "p_ready": 0.7,
-                                 "config_toml": cfg.to_toml()}, None, formal,
+                                 "config_toml": cfg.to_toml(), "check_ranges": cfg.check_ranges}, None, formal,
                    sample_bits(cfg.spec.make_core(cfg, variant, channels=1)))
              for cfg, variant, name, samples, formal in others]
     return [

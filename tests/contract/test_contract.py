@@ -209,3 +209,54 @@ def test_whole_design_is_bit_exact(name, variant, simulator, seed):
                         tag=f"contract-{name}-{variant}")
     assert result["mismatches"] == 0 and result["ok"], result.get("first_mismatches")
     assert result["samples"] == n and result["outputs"] == n and result["adc_errors"] == 0
+
+
+def flag_alone_configs(config, variant, y, most=3):
+    """Configs with one point narrowed (the fewest integer bits taken off) so that it saturates on
+    some samples of ``y`` where no other point does: ``[(point, config, mask of those samples)]``,
+    the points with the most such samples first, at most ``most``."""
+    found = []
+    n_samples = len(next(iter(y.values())) if isinstance(y, dict) else y)
+    for point in FixedModel(config, variant=variant).run(y).overflow_points:
+        fmt = config.formats.get(point)
+        if fmt is None or config.spec.points[point].same_as is not None:
+            continue
+        for int_bits in range(fmt.int_bits - 1, 0, -1):
+            formats = {**config.formats, point: QFormat(int_bits, fmt.frac_bits, fmt.rounding)}
+            for name, p in config.spec.points.items():  # a point sharing its format narrows with it
+                if p.same_as == point and name in formats:
+                    formats[name] = formats[point].with_rules(rounding=config.formats[name].rounding)
+            try:
+                narrow = FilterConfig(filter=config.filter, params=config.params, formats=formats, check_ranges=False)
+            except ConfigError:
+                break
+            flags = FixedModel(narrow, variant=variant).run(y).overflow_points
+            shared = {point} | {n for n, p in config.spec.points.items() if p.same_as == point}
+            others = np.logical_or.reduce([f for n, f in flags.items() if n not in shared] or [np.zeros(n_samples, bool)])
+            alone = np.logical_or.reduce([flags[n] for n in shared if n in flags]) & ~others
+            if alone.any():
+                found.append((point, narrow, alone))
+                break
+    return sorted(found, key=lambda f: -int(f[2].sum()))[:most]
+
+
+@pytest.mark.parametrize(("name", "variant"), HW_CASES)
+def test_each_overflow_flag_reaches_the_estimate_on_its_own(name, variant, seed):
+    """A point made narrow, so that it saturates on samples where no other point does: there the
+    estimate's flag is that point's alone, and a core that dropped it would differ from the model
+    (up to three points of each core; a filter none of whose writes can overflow at its default
+    formats has none to narrow, and that is checked instead)."""
+    from kfpga.sim.sources import stress_codes
+
+    config = FilterConfig(filter=name)
+    n = samples_for(config, variant, 1200)
+    # fixed codes: the samples that saturate are found in them, seed or not
+    y = stress_codes(1, n) if len(config.inputs) == 1 else {k: stress_codes(1 + 7 * j, n)
+                                                             for j, k in enumerate(config.inputs)}
+    cases = flag_alone_configs(config, variant, y)
+    if not cases:
+        assert not FixedModel(config, variant=variant).kernel(False).sites, "a write that can overflow, never alone"
+        return
+    for point, narrow, alone in cases:
+        report = run_core(narrow, variant, y, seed=seed, p_idle=0.2, p_ready=0.6)  # every flag against the model
+        assert report["got"]["overflow"][alone].all(), point
