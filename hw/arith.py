@@ -43,12 +43,14 @@ def _round_addend(value, shift, rounding):
     return sign.replicate(shift)  # FIX
 
 
-def requantize(m, value, src_frac, fmt, *, name):
+def requantize(m, value, src_frac, fmt, *, name, cannot_overflow=False):
     """Write ``value * 2**-src_frac`` into ``fmt``: returns ``(result, overflowed)`` signals.
 
     ``result`` is a ``signed(fmt.width)`` signal and ``overflowed`` a 1-bit signal, both driven
     combinationally in ``m``. Overflow is detected from the bits above the target width (all
     equal to the sign bit, or not), which is cheaper and shallower than a magnitude compare.
+    ``cannot_overflow``: the value always fits (the model's interval analysis says so): no
+    saturation, and the flag is 0.
     """
     value = value.as_signed()
     shift = src_frac - fmt.frac_bits
@@ -66,8 +68,8 @@ def requantize(m, value, src_frac, fmt, *, name):
     result = Signal(signed(fmt.width), name=name)
     overflowed = Signal(name=f"{name}_ovf")
     w = fmt.width
-    if len(rounded) == w:
-        m.d.comb += [result.eq(rounded), overflowed.eq(0)]
+    if len(rounded) == w or cannot_overflow:
+        m.d.comb += [result.eq(rounded[:w]), overflowed.eq(0)]
         return result, overflowed
     # the value fits iff bits [w-1:] are all equal (all copies of the sign bit)
     top = rounded[w - 1:]
@@ -95,12 +97,16 @@ class AmaranthOps(Ops):
         The config's ``{point: QFormat}``.
     prefix:
         Prepended to every signal name (to tell pipeline stages or channels apart).
+    overflow_sites:
+        The names of the writes that can overflow (the model's interval analysis, the kernel's
+        ``sites``); the others get no saturation logic and no flag. ``None``: every write can.
     """
 
-    def __init__(self, m, formats, *, prefix=""):
+    def __init__(self, m, formats, *, prefix="", overflow_sites=None):
         super().__init__(formats)
         self.m = m
         self.prefix = prefix
+        self.overflow_sites = overflow_sites
 
     def _input(self, raw, fmt, name):
         return raw.as_signed()
@@ -124,7 +130,8 @@ class AmaranthOps(Ops):
         return Mux(cond, x, y)
 
     def _rq(self, raw, src_frac, fmt, name):
-        return requantize(self.m, raw, src_frac, fmt, name=f"{self.prefix}{name}")
+        safe = self.overflow_sites is not None and name not in self.overflow_sites
+        return requantize(self.m, raw, src_frac, fmt, name=f"{self.prefix}{name}", cannot_overflow=safe)
 
     def _div(self, num, den, shift, fmt, name):
         raise NotImplementedError(

@@ -10,7 +10,7 @@ between its registers is its filter's stage functions on :class:`~kfpga.hw.arith
 
 from __future__ import annotations
 
-from functools import reduce
+from functools import cached_property, reduce
 from types import MappingProxyType
 from typing import ClassVar
 
@@ -81,6 +81,19 @@ class Core(wiring.Component):
             "o": Out(stream.Signature(output_layout(config, channels, index_bits))),
             "overflow": Out(1),
         })
+
+    @cached_property
+    def overflow_sites(self):
+        """The writes that can overflow: the model's interval analysis from the formats of the
+        state and the samples (``kfpga/compiled.py``). Every value a write gets is the model's, so
+        the others never saturate, and their logic is left out."""
+        from kfpga.fixedmodel import FixedModel
+
+        return frozenset(FixedModel(self.config, variant=self.variant).kernel(False).sites)
+
+    def arith(self, m, prefix):
+        """The operations layer's Amaranth backend for a stage of this core (:class:`AmaranthOps`)."""
+        return AmaranthOps(m, self.config.formats, prefix=prefix, overflow_sites=self.overflow_sites)
 
     def flag_outputs(self, m, count):
         """``o.payload.overflow`` and the sticky ``overflow`` from ``count`` registered flag bits."""
@@ -209,7 +222,7 @@ class LoopPipeline(Core):
         reread = set(regs) if self.channels == 1 else set()
         last_flags = []
         for n, group in enumerate(groups, start=1):
-            ops = AmaranthOps(m, f, prefix=f"s{n}_")
+            ops = self.arith(m, prefix=f"s{n}_")
             k = ops.constants(self.constants)
             if n > 1:
                 needed = set().union(*(self.reads[self.steps.index(s)] for s in group))
@@ -243,7 +256,7 @@ class LoopPipeline(Core):
         pending = [flags, *last_flags]  # flags not yet ORed into one register bit
         steps = self.output_steps()
         for n, step in enumerate(steps, start=1):
-            ops = AmaranthOps(m, f, prefix=f"o{n}_")
+            ops = self.arith(m, prefix=f"o{n}_")
             out = step(ops, ops.constants(self.constants), out)
             pending += [flag for _, flag in ops.flags]
             if n < len(steps):

@@ -15,7 +15,6 @@ from typing import ClassVar
 from amaranth import Cat, Const, Module, Mux, Signal, signed
 
 from kfpga.ads8364 import CODE_FORMAT
-from kfpga.hw.arith import AmaranthOps
 from kfpga.hw.core import Core, LoopPipeline, write_estimate
 from kfpga.hw.divider import Divider
 from kfpga.hw.storage import at, select
@@ -209,17 +208,17 @@ class FullCore(Core):
             return fx(work[name], name)
 
         # -- T1: exact F x and F P -------------------------------------------------------------
-        t1 = AmaranthOps(m, f, prefix="t1_")
+        t1 = self.arith(m, prefix="t1_")
         k = t1.constants(self.constants)
         xl_sum = [t1.hold(v, f"xlsum{i}") for i, v in enumerate(eq.predict_sums(t1, k, x))]
         fp = [[t1.hold(v, f"fp{i}{j}") for j, v in enumerate(row)] for i, row in enumerate(eq.covariance_fp(t1, k, p_read))]
         # -- T2: xl, and (F P) F^T + G Q G^T exact --------------------------------------------------
-        t2 = AmaranthOps(m, f, prefix="t2_")
+        t2 = self.arith(m, prefix="t2_")
         xl = [t2.hold(t2.rq(v, f"xl{i + 1}"), f"xl{i}") for i, (v, _) in enumerate(xl_sum)]
         pl_sum = {ij: t2.hold(v, f"plsum{ij[0]}{ij[1]}")
                   for ij, v in eq.covariance_sums(t2, k, [[h for h, _ in row] for row in fp]).items()}
         # -- T3: Pl, yh, e ---------------------------------------------------------------------------
-        t3 = AmaranthOps(m, f, prefix="t3_")
+        t3 = self.arith(m, prefix="t3_")
         pl = {ij: t3.hold(t3.rq(v, f"pl{ij[0] + 1}{ij[1] + 1}"), f"pl{ij[0]}{ij[1]}") for ij, (v, _) in pl_sum.items()}
         xl_r = [h for h, _ in xl]
         yh = eq.observe(t3, k, xl_r)
@@ -227,7 +226,7 @@ class FullCore(Core):
         yh_r, yh_assign = t3.hold(yh[0], "yh")
         e_r, e_assign = t3.hold(e[0], "e")
         # -- T4: S and the dividends -------------------------------------------------------------------
-        t4 = AmaranthOps(m, f, prefix="t4_")
+        t4 = self.arith(m, prefix="t4_")
         pl_r = {ij: h for ij, (h, _) in pl.items()}
         hp = eq.observed_rows(t4, k, pl_r)
         s = eq.innovation_variance(t4, k, hp)
@@ -273,7 +272,7 @@ class FullCore(Core):
         products = {p: Fx(prod_regs[idx], pairs[idx][0].frac + pairs[idx][1].frac) for idx, p in enumerate(self.products)}
 
         # -- WB: the corrections from the registered products ------------------------------------------------
-        wb = AmaranthOps(m, f, prefix="wb_")
+        wb = self.arith(m, prefix="wb_")
         state = eq.update_corrections(wb, k, xl_r, pl_r, products)
         wb_bits = Signal(len(wb.flags), name="wb_flags")
         done = {nm: Signal(signed(f[self.state_points[nm]].width), name=f"{nm}_done") for nm in (f"x{i + 1}" for i in range(n))}

@@ -20,7 +20,6 @@ from typing import ClassVar
 from amaranth import Cat, Const, Module, Mux, Signal, signed
 
 from kfpga.ads8364 import CODE_FORMAT
-from kfpga.hw.arith import AmaranthOps
 from kfpga.hw.core import Core, LoopPipeline, write_estimate
 from kfpga.hw.divider import Divider
 from kfpga.hw.storage import at, select
@@ -183,7 +182,7 @@ class FullKalman(Core):
         flags = Signal()  # OR of the overflow flags of this update so far
 
         # -- TU1: the time update, from the working registers ----------------------------------
-        tu1 = AmaranthOps(m, f, prefix="tu1_")
+        tu1 = self.arith(m, prefix="tu1_")
         k = tu1.constants(self.constants)
         x = {n: tu1.input(work[n], points[n], n) for n in names}
         xl1 = eq.predict(tu1, x["x1"], x["v"])                                        # xl1 = x1 + v
@@ -192,7 +191,7 @@ class FullKalman(Core):
         xl1_r, pl11_r, pl12_r, pl21_r, pl22_r = (h for h, _ in held1)
 
         # -- TU2: S, the innovation, the dividends ----------------------------------------------
-        tu2 = AmaranthOps(m, f, prefix="tu2_")
+        tu2 = self.arith(m, prefix="tu2_")
         s = eq.innovation_variance(tu2, k, pl11_r)                                    # S = pl11 + R
         e = eq.innovation(tu2, tu2.input(sample, CODE_FORMAT, "y"), xl1_r)            # e = y - xl1
         e_r, e_assign = tu2.hold(e, "e")
@@ -217,13 +216,13 @@ class FullKalman(Core):
             return Mux(numerator < 0, -result.quotient, result.quotient)
 
         # -- MUL: the products (registered); WB: the sums, from the registered products ----------
-        mul = AmaranthOps(m, f, prefix="mul_")
+        mul = self.arith(m, prefix="mul_")
         g1, g2 = mul.input(k1, "gain", "K1"), mul.input(k2, "gain", "K2")
         k1e, k2e, pk = eq.full_products(mul, g1, g2, e_r, pl11_r, pl12_r)
         products = [mul.hold(v, n) for v, n in zip((k1e, k2e, *pk), ("k1e", "k2e", "k1p11", "k1p12", "k2p11", "k2p12"),
                                                    strict=True)]
         k1e_r, k2e_r, *pk_r = (p for p, _ in products)
-        wb = AmaranthOps(m, f, prefix="wb_")
+        wb = self.arith(m, prefix="wb_")
         x1_n = eq.correct(wb, xl1_r, k1e_r, "x1")                                     # x1 = xl1 + K1 e
         v_n = eq.correct(wb, x["v"], k2e_r, "v")                                      # v = v + K2 e
         p_n = eq.covariance_correct(wb, (pl11_r, pl12_r, pl21_r, pl22_r), pk_r)       # P = P' - K C P'
@@ -236,7 +235,7 @@ class FullKalman(Core):
         v_done = Signal(signed(f["v"].width), name="v_done")
         x1_done = Signal(signed(f["x1"].width), name="x1_done")
         v_done_fx = Fx(v_done, f["v"].frac_bits, None, f["v"], "v")
-        rate_ops = [AmaranthOps(m, f, prefix=f"x{n}_") for n in range(1, 4)]
+        rate_ops = [self.arith(m, prefix=f"x{n}_") for n in range(1, 4)]
         if self.rate_steps:
             operand, op_assign = rate_ops[0].hold(eq.rate_operand(rate_ops[0], k, v_done_fx), "vt")
             product, pr_assign = rate_ops[1].hold(eq.rate_product(rate_ops[1], k, operand), "vt_inv_t")

@@ -22,6 +22,9 @@ it); an output copy has no WRITE.
 
 from __future__ import annotations
 
+import operator
+from functools import reduce
+
 from amaranth import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib.memory import Memory
 
@@ -177,18 +180,26 @@ class SequentialCore(Core):
 
         # what READ registers of the instruction: its operation, and the constants of its target
         # format (a table of the program's (shift, width) pairs, not shifters of run-time widths)
-        op = {name: Signal(name=f"op_{name}") for name in OPS}
-        rounding, wrap = Signal.like(ins["rounding"], name="k_rounding"), Signal(name="k_wrap")
+        # only what the program uses is built: its operations, its rounding rules, wrap-around if
+        # it wraps, constants as wide as its shifts and target widths (the rest could never act)
+        used = {i.op for i in p.instructions}
+        rqs = [i for i in p.instructions if i.op == "rq"]
+        op = {name: Signal(name=f"op_{name}") if name in used else Const(0, 1) for name in OPS}
+        rounding = Signal.like(ins["rounding"], name="k_rounding")
+        wrap = Signal(name="k_wrap") if any(i.wrap for i in rqs) else Const(0, 1)
         largest = max([abs(i.shift) for i in p.instructions] + [1])
-        k_amount, k_right = Signal(range(largest + 1), name="k_amount"), Signal(name="k_right")
-        k_half, k_fix = Signal(w + 1, name="k_half"), Signal(w + 1, name="k_fix")  # 2**(s-1), 2**s - 1
-        k_below = Signal(w + 1, name="k_below")  # 2**(s-1) - 1: half an LSB less one, so no adder picks it
-        k_top, k_mask = Signal(w + 1, name="k_top"), Signal(w + 2, name="k_mask")  # 2**(width-1) - 1, 2**width - 1
         table = sorted({(i.shift, i.width) for i in p.instructions if i.op in ("rq", "div", "sqrt", "shl")})
+        widest = max([width for _, width in table] + [1])
+        k_amount, k_right = Signal(range(largest + 1), name="k_amount"), Signal(name="k_right")
+        k_half, k_fix = Signal(largest + 1, name="k_half"), Signal(largest + 1, name="k_fix")  # 2**(s-1), 2**s - 1
+        k_below = Signal(largest + 1, name="k_below")  # 2**(s-1) - 1: half an LSB less one, so no adder picks it
+        k_top, k_mask = Signal(widest, name="k_top"), Signal(widest + 1, name="k_mask")  # 2**(width-1) - 1, 2**width - 1
 
         def read_instruction():
-            m.d.sync += [op[name].eq(ins["op"] == OPS.index(name)) for name in OPS]
-            m.d.sync += [rounding.eq(ins["rounding"]), wrap.eq(ins["wrap"])]
+            m.d.sync += [op[name].eq(ins["op"] == OPS.index(name)) for name in OPS if name in used]
+            m.d.sync += rounding.eq(ins["rounding"])
+            if isinstance(wrap, Signal):
+                m.d.sync += wrap.eq(ins["wrap"])
             with m.Switch(Cat(ins["shift"], ins["width"])):
                 for sh, width in table:
                     with m.Case((sh & 0xFF) | width << 8):
@@ -202,30 +213,28 @@ class SequentialCore(Core):
         wa, wb = p.mul_widths
         mul_a, mul_b = Signal(signed(wa), name="mul_a"), Signal(signed(wb), name="mul_b")
         alu = Signal(signed(w), name="alu")
-        m.d.comb += alu.eq(Mux(op["add"], a + b, 0) | Mux(op["sub"], a - b, 0) | Mux(op["neg"], -a, 0)
-                           | Mux(op["abs"], Mux(a < 0, -a, a), 0) | Mux(op["lt"], a < b, 0)
-                           | Mux(op["mux"], Mux(a != 0, b, c), 0) | Mux(op["shl"], a << k_amount, 0)
-                           | Mux(op["move"], a, 0))
+        terms = {"add": a + b, "sub": a - b, "neg": -a, "abs": Mux(a < 0, -a, a), "lt": a < b,
+                 "mux": Mux(a != 0, b, c), "shl": a << k_amount, "move": a}
+        m.d.comb += alu.eq(reduce(operator.or_, [Mux(op[n], t, 0) for n, t in terms.items() if n in used], Const(0, 1)))
         # rq: EXEC registers the value (in ``held``, free then) and its rounding addend; SHIFT adds
         # them and shifts; SATURATE saturates or wraps around
         negative = a < 0
         neg_r, bad_r = Signal(name="neg_r"), Signal(name="bad_r")
         held = Signal(w, name="held")  # a unit's result; an rq's value
         addend, addend_next = Signal(signed(w + 2), name="rq_addend"), Signal(signed(w + 2), name="rq_addend_next")
+        # the addends of ROUND and CONVERGENT chosen between two registered constants, half an
+        # LSB and one less, by a bit of a: a multiplexer, not a carry chain (k_half and k_below
+        # are 0 when nothing is shifted off); FLOOR adds nothing
+        addends = {Rounding.NEAREST: k_half,
+                   Rounding.ROUND: Mux(negative, k_below, k_half),  # half - 1 for a negative value
+                   # the bit that becomes the LSB breaks a tie: bit s of a (s = k_amount) through the
+                   # mask 2 k_half = 2**s, an AND and an OR tree, not a barrel shifter
+                   Rounding.CONVERGENT: Mux((a & (k_half << 1)).any(), k_half, k_below),
+                   Rounding.FIX: Mux(negative, k_fix, 0)}
         with m.Switch(rounding):
-            with m.Case(ROUNDINGS.index(Rounding.NEAREST)):
-                m.d.comb += addend_next.eq(k_half)
-            # the addends of ROUND and CONVERGENT chosen between two registered constants, half an
-            # LSB and one less, by a bit of a: a multiplexer, not a carry chain (k_half and k_below
-            # are 0 when nothing is shifted off)
-            with m.Case(ROUNDINGS.index(Rounding.ROUND)):  # half - 1 for a negative value
-                m.d.comb += addend_next.eq(Mux(negative, k_below, k_half))
-            with m.Case(ROUNDINGS.index(Rounding.CONVERGENT)):  # the bit that becomes the LSB breaks a tie
-                # bit s of a (s = k_amount) through the mask 2 k_half = 2**s: an AND and an OR tree,
-                # not a barrel shifter
-                m.d.comb += addend_next.eq(Mux((a & (k_half << 1)).any(), k_half, k_below))
-            with m.Case(ROUNDINGS.index(Rounding.FIX)):
-                m.d.comb += addend_next.eq(Mux(negative, k_fix, 0))
+            for rule in sorted({ROUNDINGS[i.rounding] for i in rqs} - {Rounding.FLOOR}, key=ROUNDINGS.index):
+                with m.Case(ROUNDINGS.index(rule)):
+                    m.d.comb += addend_next.eq(addends[rule])
         summed = Signal(signed(w + 2), name="rq_sum")
         m.d.comb += summed.eq(held.as_signed() + addend)
         moved = Signal(signed(w + 2), name="rq_moved")

@@ -28,7 +28,6 @@ from functools import reduce
 from amaranth import Const, Module, Signal
 
 from kfpga.ads8364 import CODE_FORMAT
-from kfpga.hw.arith import AmaranthOps
 from kfpga.hw.core import Core, register_stage, write_estimate
 from kfpga.hw.storage import at, check_channels
 from kfpga.model import tukey53h as eq
@@ -115,7 +114,6 @@ class Tukey53HCore(Core):
 
     def elaborate(self, platform):
         m = Module()
-        f = self.config.formats
         advance = Signal()
         m.d.comb += [advance.eq(~self.o.valid | self.o.ready), self.i.ready.eq(advance)]
 
@@ -129,7 +127,7 @@ class Tukey53HCore(Core):
         pending = []  # overflow flags not yet in a register bit
         in_range = channel < self.channels if 1 < self.channels < 2 ** len(channel) else Const(1, 1)
         for n, (_, lines, step) in enumerate(self._stages, start=1):
-            ops = AmaranthOps(m, f, prefix=f"s{n}_")
+            ops = self.arith(m, prefix=f"s{n}_")
             k = ops.constants(self.constants)
             if lines:
                 regs = self._states(list(lines))

@@ -64,6 +64,8 @@ class Block:
 
 
 def blocks():
+    import numpy as np
+
     from kfpga.config import FilterConfig
     from kfpga.fixed import QFormat
     from kfpga.hw.clockdiv import ClockDivider
@@ -71,6 +73,7 @@ def blocks():
     from kfpga.hw.generate import TOP_NAME
     from kfpga.hw.kalman2 import FullKalman, SteadyKalman
     from kfpga.hw.top import AdcFrontend, FilterSystem
+    from kfpga.sim.sources import stress_codes, threshold_codes
 
     config = FilterConfig()
     # the time-varying core with x1 a bit narrower than its range: the write of x1 then saturates
@@ -79,23 +82,28 @@ def blocks():
     # the time-varying core's divider, at its widths, alone: its own bench drives every kind of
     # operand, where the core's bench reaches few of them
     widths = divider_widths()
-    # the other filters' cores on their core bench; a core whose formal harness is another
-    # instance (a narrow 53H, the sequential core's handshake twin) has no property to kill with:
-    # the mutation names cells of this instance
+    # the other filters' cores on their core bench; their formal harnesses hold other instances
+    # (the defaults' widths and channels, a narrow 53H, the sequential core's handshake twin),
+    # where this instance's cells are not, so no property kills here
     # the alpha-beta core with v a bit narrower than its range: its write then saturates on its
     # own on some stress samples (at the defaults no stress sample saturates v alone)
     ab = FilterConfig(filter="alpha-beta")
     ab = FilterConfig(filter="alpha-beta", formats={**ab.formats, "v": QFormat(16, ab.formats["v"].frac_bits)},
                       check_ranges=False)
-    others = [(ab, "steady", "alpha-beta core", 600, None),
-              (FilterConfig(filter="53h"), "online", "53h core", 600, None),
-              (FilterConfig(filter="ls-frontend"), "steady", "sequential core (ls-frontend)", 120, None)]
-    cores = [Block(name, "core", {"variant": variant, "channels": 1, "config": cfg},
-                   (lambda cfg=cfg, variant=variant: cfg.spec.make_core(cfg, variant, channels=1)), "kfpga_core", "",
-                   "test_core", {"variant": variant, "samples": samples, "p_idle": 0.2, "p_ready": 0.7,
-                                 "config_toml": cfg.to_toml(), "check_ranges": cfg.check_ranges}, None, formal,
-                   sample_bits(cfg.spec.make_core(cfg, variant, channels=1)))
-             for cfg, variant, name, samples, formal in others]
+    # the 53H core with two channels (its channel pipeline then carries a bit), on stress codes and
+    # spikes at its threshold's boundary, both signs
+    tukey = FilterConfig(filter="53h")
+    boundary = [int(c) for c in np.r_[stress_codes(1, 300), threshold_codes(1, 480, tukey.params.threshold, hold=24)]]
+    others = [(ab, "steady", "alpha-beta core", {"samples": 600}, 1),
+              (tukey, "online", "53h core", {"codes": boundary, "order": "round-robin"}, 2),
+              (FilterConfig(filter="ls-frontend"), "steady", "sequential core (ls-frontend)", {"samples": 120}, 1)]
+    cores = [Block(name, "core", {"variant": variant, "channels": channels, "config": cfg},
+                   (lambda cfg=cfg, variant=variant, c=channels: cfg.spec.make_core(cfg, variant, channels=c)),
+                   "kfpga_core", "", "test_core",
+                   {"variant": variant, **signal, "channels": channels, "p_idle": 0.2, "p_ready": 0.7,
+                    "config_toml": cfg.to_toml(), "check_ranges": cfg.check_ranges}, None, None,
+                   sample_bits(cfg.spec.make_core(cfg, variant, channels=channels)))
+             for cfg, variant, name, signal, channels in others]
     return [
         Block("clock divider", "divider", {"ratio": 10}, lambda: ClockDivider(ratio=10), "kfpga_divider", "",
               "test_clockdiv", {"ratio": 10}, None, "clock divider /10"),

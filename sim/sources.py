@@ -9,7 +9,23 @@ from kfpga.ads8364 import CODE_MAX, CODE_MIN
 from kfpga.csvio import read_header, read_samples
 from kfpga.model.reference import KalmanParams
 
-__all__ = ["Source", "scenario_source", "csv_source", "stress_codes"]
+__all__ = ["Source", "scenario_source", "csv_source", "stress_codes", "threshold_codes"]
+
+
+def threshold_codes(seed, n, threshold, *, hold=12):
+    """Codes at an outlier test's boundary: levels held for ``hold`` samples (12: the medians
+    and the Hanning value of their middle are the level itself; 24 for two channels taking
+    turns), each with one spike ``level + d`` in the middle, ``|d|`` = ``threshold`` - 2 ..
+    ``threshold`` + 2 (an integer threshold: rounded down) of either sign: a comparison or an
+    absolute value a few codes off decides some of them the other way."""
+    rng = np.random.default_rng(seed)
+    t = int(threshold)
+    levels = rng.integers(CODE_MIN + t + 3, CODE_MAX - t - 2, n // hold + 1)
+    y = np.repeat(levels, hold)[:n]
+    offsets = rng.choice([t - 2, t - 1, t, t + 1, t + 2], len(levels)) * rng.choice([-1, 1], len(levels))
+    spikes = np.arange(hold // 2, n, hold)
+    y[spikes] += offsets[: len(spikes)]
+    return y.astype(np.int64)
 
 
 def stress_codes(seed, n):

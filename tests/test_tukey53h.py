@@ -306,3 +306,20 @@ def test_compare_prefilter_cli(capsys, seed):
     m = json.loads(capsys.readouterr().out)
     assert m["glitches"] > 5 and m["replaced"] >= m["glitches"]
     assert m["with_prefilter"]["rmse_fixed"] < 3.0 < 100 < m["without_prefilter"]["rmse_fixed"]
+
+
+@pytest.mark.parametrize("channels", [1, 2])
+def test_core_decides_at_the_threshold(channels, seed):
+    """Spikes of |d| = threshold - 2 .. threshold + 2, either sign, on held levels (where the
+    smoothed value is the level): replaced exactly where |d| > threshold, by the core as by the
+    model (an absolute value or a comparison a few codes off decides some the other way)."""
+    from kfpga.sim.sources import threshold_codes
+
+    t = CONFIG.params.threshold
+    y = threshold_codes(seed, 600, t)
+    spikes = np.arange(6, 600, 12)
+    d = y[spikes] - y[spikes - 1]
+    out = FixedModel(CONFIG).run(y).outputs["y"]
+    np.testing.assert_array_equal(out[spikes + th.DELAY] != y[spikes], np.abs(d) > t)  # the paper's test
+    assert (d < -t).any() and (d > t).any() and (np.abs(d) <= t).any()
+    run_core(CONFIG, "online", y, seed=seed, channels=channels, p_idle=0.2, p_ready=0.6)  # every output the model's
