@@ -1281,7 +1281,8 @@ def build_parser():
     q.add_argument("--samples", type=_positive_int, metavar="N", help="samples of the synthetic series (default: 480, "
                                                                       "the paper's count; at least 8)")
     q.add_argument("--input", metavar="CSV", help="your roll series (deg, one per row every 0.5 s) instead of the "
-                                                  "synthetic one: the only or last column, lines with # are comments")
+                                                  "synthetic one: the only or last column, under an optional header; "
+                                                  "lines with # are comments")
     q.add_argument("--fading", type=float, metavar="S", help="the fading factor s of the improved form (default: the "
                                                              "paper's 100; > 0, 1 is none)")
     q.add_argument("--json", action="store_true", help="print the tables as JSON")

@@ -129,18 +129,31 @@ def write_columns(path, columns):
         writer.writerows(zip(*cells, strict=True))
 
 
+def _is_number(text):
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def read_series(path, *, column=None):
     """A series of real numbers from one column of a CSV file (lines starting with ``#`` are
-    comments): the only column, or the one named ``column``, or the last one. Every problem
+    comments): the only column, or the one named ``column``, or the last one. The first line is
+    a header unless all its cells are numbers. Every problem
     raises :class:`InputError` with the file and line: no rows, a missing column, a cell that
     is empty, not a number or not finite."""
     path = Path(path)
     text = read_text(path, what="file")
     lines = [(n, line) for n, line in enumerate(text.splitlines(), start=1) if not line.lstrip().startswith("#")]
     if not lines:
-        raise InputError(f"{path}: the file is empty (expected a header line and one number per row)")
+        raise InputError(f"{path}: the file is empty (expected one number per row, under an optional header line)")
     rows = list(csv.reader([line for _, line in lines]))
     names = [h.strip() for h in rows[0]]
+    if all(_is_number(name) for name in names):
+        # no header: the first line is a row of numbers, so it is data, not names
+        names = [f"column {k + 1}" for k in range(len(names))]
+        lines, rows = [(lines[0][0], ""), *lines], [names, *rows]
     if column is not None and column not in names:
         raise InputError(f"{path}: line {lines[0][0]}: no column named {column!r} (the header has: {', '.join(names)})")
     k = names.index(column) if column is not None else len(names) - 1

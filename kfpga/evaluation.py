@@ -572,23 +572,24 @@ def roll(*, seed, samples=480, series=None, params=None):
 
 
 def roll_table(result):
+    w = max(34, *(len(r["data"]) for r in result["rows"]))
     lines = [f"T = {result['params']['T']:g} s, two filters on alternate samples, each predicting 2 samples "
              f"(1 s) ahead; Q = {result['params']['q']:g} I, R = {result['params']['R']:g}, s = {result['params']['s']:g}, "
              "P0 the paper's (all 10s: singular, so the square root starts from A P0 A' + Q); RMSE of the prediction "
              "against the sample it predicts", "",
-             f"{'data':<34} {'form':<40} {'RMSE (deg)':>10} {'predictions':>12}"]
+             f"{'data':<{w}} {'form':<40} {'RMSE (deg)':>10} {'predictions':>12}"]
     for r in result["rows"]:
-        lines.append(f"{r['data']:<34} {r['form']:<40} {r['rmse_deg']:>10.4f} {r['predictions']:>12}")
-    lines += ["", "fading factor s (improved form):", f"{'data':<34} " + "".join(f"{s:>8g}" for s in ROLL_FADING)]
+        lines.append(f"{r['data']:<{w}} {r['form']:<40} {r['rmse_deg']:>10.4f} {r['predictions']:>12}")
+    lines += ["", "fading factor s (improved form):", f"{'data':<{w}} " + "".join(f"{s:>8g}" for s in ROLL_FADING)]
     for data in dict.fromkeys(r["data"] for r in result["sweep"]):
-        lines.append(f"{data:<34} " + "".join(f"{r['rmse_deg']:>8.4f}" for r in result["sweep"] if r["data"] == data))
+        lines.append(f"{data:<{w}} " + "".join(f"{r['rmse_deg']:>8.4f}" for r in result["sweep"] if r["data"] == data))
     lines += ["", "bit-accurate predictor (the core's integers; formats "
               + ", ".join(f"{k} {v}" for k, v in result["formats"].items()) + "), against float from the same start "
               "(each filter from x = 0 and A P0 A' + Q):",
-              f"{'data':<34} {'RMSE fixed':>10} {'RMSE float':>10} {'max |fixed - float|':>20} "
+              f"{'data':<{w}} {'RMSE fixed':>10} {'RMSE float':>10} {'max |fixed - float|':>20} "
               f"{'rms':>9} {'overflows':>9} {'not PD':>7}"]
     for r in result["fixed"]:
-        lines.append(f"{r['data']:<34} {r['rmse_fixed_deg']:>10.4f} {r['rmse_float_deg']:>10.4f} "
+        lines.append(f"{r['data']:<{w}} {r['rmse_fixed_deg']:>10.4f} {r['rmse_float_deg']:>10.4f} "
                      f"{r['max_from_float_deg']:>20.6f} {r['rms_from_float_deg']:>9.6f} {r['overflowed']:>9} "
                      f"{r['not_positive_definite']:>7}")
     lines += ["", f"word lengths ({result['words_data']}): updates whose covariance is not positive definite, of "

@@ -359,7 +359,7 @@ def main(argv=None):
         prog="python -m kfpga.mutate",
         description="Mutation testing of the hardware blocks: Yosys mutants of each block, killed by its cocotb "
                     "bench (Icarus) or its formal properties, survivors checked for equivalence with SymbiYosys. "
-                    "Writes build/mutate/report.json and prints the score per block (goal: >= 95 %%).")
+                    "Writes build/mutate/report.json and prints the score per block (goal: >= 95 %).")
     parser.add_argument("--mutants", type=int, default=20, help="mutants per block (default 20)")
     parser.add_argument("--seed", type=int, default=1, help="seed of Yosys's mutant selection and of the benches (default 1)")
     parser.add_argument("--only", metavar="TEXT", help="the blocks whose name contains TEXT")

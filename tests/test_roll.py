@@ -115,6 +115,21 @@ def test_evaluate_roll_cli_errors(tmp_path, capsys):
     short.write_text("# a comment\nroll\n1\n2\n3\n")
     assert main(["evaluate", "roll", "--input", str(short)]) == 2
     assert "3 samples; the interval predictor needs at least 8" in capsys.readouterr().err
+    # without a header, the first line is a sample like the others (none is lost)
+    short.write_text("1.5\n2\n3\n4\n")
+    assert main(["evaluate", "roll", "--input", str(short)]) == 2
+    assert "4 samples; the interval predictor needs at least 8" in capsys.readouterr().err
+
+
+def test_read_series_header_is_optional(tmp_path):
+    from kfpga.csvio import read_series
+
+    path = tmp_path / "s.csv"
+    path.write_text("# deg\nt,roll\n0,1.5\n0.5,-2\n")
+    assert read_series(path).tolist() == [1.5, -2.0]
+    path.write_text("0,1.5\n0.5,-2\n")
+    assert read_series(path).tolist() == [1.5, -2.0]
+    assert read_series(path, column="column 1").tolist() == [0.0, 0.5]
 
 
 # -- the bit-accurate predictor (the registered filter "roll") -----------------------------------------------
