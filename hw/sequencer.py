@@ -239,10 +239,14 @@ class SequentialCore(Core):
         m.d.comb += summed.eq(held.as_signed() + addend)
         moved = Signal(signed(w + 2), name="rq_moved")
         top = k_top.as_signed()
-        kept = Signal(w + 2, name="rq_kept")  # the low width bits ...
-        m.d.comb += kept.eq(moved.as_unsigned() & k_mask)
-        wrapped = (kept - ((kept & (k_top + 1)) << 1)).as_signed()  # ... as a signed width-bit value
         high, low = moved > top, moved < -top - 1
+        bounded = Mux(high, top, Mux(low, -top - 1, moved))
+        if isinstance(wrap, Signal):
+            kept = Signal(w + 2, name="rq_kept")  # the low width bits ...
+            m.d.comb += kept.eq(moved.as_unsigned() & k_mask)
+            wrapped = (kept - ((kept & (k_top + 1)) << 1)).as_signed()  # ... as a signed width-bit value
+            bounded = Mux(wrap, wrapped, bounded)
+        units = bool(p.count("div") or p.count("sqrt"))
         # a division or a root: its operand prepared, the unit run, its result bounded
         magnitude = Signal(w, name="magnitude")  # a unit's operand before its shift
         unit_done, unit_value, unit_overflow = Const(1, 1), Const(0, 1), Const(0, 1)
@@ -258,7 +262,7 @@ class SequentialCore(Core):
             m.submodules.square_root = root
             radicand = Signal(p.radicand_bits, name="radicand")
             m.d.comb += [root.i.valid.eq(start & op["sqrt"]), root.o.ready.eq(1), root.i.payload.radicand.eq(radicand)]
-        if p.count("div") or p.count("sqrt"):
+        if units:
             done = Signal(name="unit_done")
             value = Signal(w, name="unit_value")
             over = Signal(name="unit_overflow")
@@ -323,8 +327,9 @@ class SequentialCore(Core):
                 m.d.sync += [result.eq(alu), flag.eq(0), mul_a.eq(a[:wa]), mul_b.eq(b[:wb]), held.eq(a),
                              addend.eq(addend_next)]
                 # a division's dividend is |a|, a root's radicand a (0 if negative): shifted in PREP
-                m.d.sync += [magnitude.eq(Mux(negative, Mux(op["div"], -a, 0), a)), neg_r.eq(negative),
-                             bad_r.eq(Mux(op["div"], b <= 0, negative))]
+                if units:
+                    m.d.sync += [magnitude.eq(Mux(negative, Mux(op["div"], -a, 0), a)), neg_r.eq(negative),
+                                 bad_r.eq(Mux(op["div"], b <= 0, negative))]
                 if p.count("div"):
                     m.d.sync += den.eq(Mux(b > 0, b.as_unsigned(), 0)[:p.divisor_bits])
                 with m.If(op["out"]):
@@ -337,40 +342,41 @@ class SequentialCore(Core):
                     m.next = "SHIFT"
                 with m.Elif(op["mul"]):
                     m.next = "PRODUCT"
-                with m.Elif(op["div"] | op["sqrt"]):
-                    m.next = "PREP"
+                if units:
+                    with m.Elif(op["div"] | op["sqrt"]):
+                        m.next = "PREP"
                 with m.Else():
                     m.next = "WRITE"
             with m.State("SHIFT"):
                 m.d.sync += moved.eq(Mux(k_right, summed >> k_amount, summed << k_amount))
                 m.next = "SATURATE"
             with m.State("SATURATE"):
-                m.d.sync += [result.eq(Mux(wrap, wrapped, Mux(high, top, Mux(low, -top - 1, moved)))),
-                             flag.eq(high | low)]
+                m.d.sync += [result.eq(bounded), flag.eq(high | low)]
                 m.next = "WRITE"
             with m.State("PRODUCT"):  # from registered operands: the multiplier alone in the cycle
                 m.d.sync += result.eq(mul_a * mul_b)
                 m.next = "WRITE"
-            with m.State("PREP"):  # the operand shifted: left, or (a root's negative shift) right, a floor shift
-                if p.count("div"):
-                    m.d.sync += num.eq((magnitude << k_amount)[:p.dividend_bits])
-                if p.count("sqrt"):
-                    m.d.sync += radicand.eq(Mux(k_right, magnitude << k_amount, magnitude >> k_amount)[:p.radicand_bits])
-                m.next = "START"
-            with m.State("START"):
-                m.d.comb += start.eq(1)
-                m.next = "WAIT"
-            with m.State("WAIT"):
-                with m.If(unit_done):
-                    m.d.sync += [held.eq(unit_value), flag.eq(bad_r | unit_overflow)]
-                    m.next = "BOUND"
-            with m.State("BOUND"):  # the quotient or root bounded by its format ...
-                with m.If(flag | (held > k_top)):
-                    m.d.sync += [held.eq(k_top), flag.eq(1)]
-                m.next = "SIGN"
-            with m.State("SIGN"):  # ... then a quotient takes the dividend's sign; a negative radicand's root is 0
-                m.d.sync += result.eq(Mux(op["div"] & neg_r, -held, Mux(op["sqrt"] & neg_r, 0, held)))
-                m.next = "WRITE"
+            if units:  # a division or a root: its operand shifted, the unit run, the result bounded and signed
+                with m.State("PREP"):  # the operand shifted: left, or (a root's negative shift) right, a floor shift
+                    if p.count("div"):
+                        m.d.sync += num.eq((magnitude << k_amount)[:p.dividend_bits])
+                    if p.count("sqrt"):
+                        m.d.sync += radicand.eq(Mux(k_right, magnitude << k_amount, magnitude >> k_amount)[:p.radicand_bits])
+                    m.next = "START"
+                with m.State("START"):
+                    m.d.comb += start.eq(1)
+                    m.next = "WAIT"
+                with m.State("WAIT"):
+                    with m.If(unit_done):
+                        m.d.sync += [held.eq(unit_value), flag.eq(bad_r | unit_overflow)]
+                        m.next = "BOUND"
+                with m.State("BOUND"):  # the quotient or root bounded by its format ...
+                    with m.If(flag | (held > k_top)):
+                        m.d.sync += [held.eq(k_top), flag.eq(1)]
+                    m.next = "SIGN"
+                with m.State("SIGN"):  # ... then a quotient takes the dividend's sign; a negative radicand's root is 0
+                    m.d.sync += result.eq(Mux(op["div"] & neg_r, -held, Mux(op["sqrt"] & neg_r, 0, held)))
+                    m.next = "WRITE"
             with m.State("WRITE"):
                 with m.If(~(is_state(ins["dst"]) & ~in_range)):  # never an out-of-range channel's state
                     write(physical(ins["dst"]), result)
