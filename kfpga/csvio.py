@@ -150,23 +150,15 @@ def read_series(path, *, column=None):
         raise InputError(f"{path}: the file is empty (expected one number per row, under an optional header line)")
     rows = list(csv.reader([line for _, line in lines]))
     names = [h.strip() for h in rows[0]]
-    if all(_is_number(name) for name in names):
-        # no header: the first line is a row of numbers, so it is data, not names
+    # no header when the first line is a row of numbers: it is a sample, not names
+    first = 0 if all(_is_number(name) for name in names) else 1
+    if first == 0:
         names = [f"column {k + 1}" for k in range(len(names))]
-        lines, rows = [(lines[0][0], ""), *lines], [names, *rows]
     if column is not None and column not in names:
         raise InputError(f"{path}: line {lines[0][0]}: no column named {column!r} (the header has: {', '.join(names)})")
     k = names.index(column) if column is not None else len(names) - 1
-    values = []
-    for (n, _), row in zip(lines[1:], rows[1:], strict=True):
-        cell = row[k].strip() if k < len(row) else ""
-        try:
-            value = float(cell)
-        except ValueError:
-            raise InputError(f"{path}: line {n}: {names[k]} = {cell!r} is not a number") from None
-        if not math.isfinite(value):
-            raise InputError(f"{path}: line {n}: {names[k]} = {cell!r} is not a finite number")
-        values.append(value)
+    values = [_number(row[k] if k < len(row) else "", f"{path}: line {n}", names[k])
+              for (n, _), row in zip(lines[first:], rows[first:], strict=True)]
     if not values:
         raise InputError(f"{path}: no rows after the header")
     return np.array(values)
