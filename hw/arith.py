@@ -17,7 +17,22 @@ from amaranth import Cat, Const, Mux, Signal, signed
 from kfpga.fixed import Overflow, Rounding
 from kfpga.ops import Ops
 
-__all__ = ["AmaranthOps", "requantize"]
+__all__ = ["AmaranthOps", "any_flag", "live_flags", "requantize"]
+
+#: The flag of a write that cannot overflow: a constant, so that no register, OR gate or output
+#: bit is built for it (a register that always holds 0 is logic no test can check).
+NO_OVERFLOW = Const(0, 1)
+
+
+def live_flags(flags):
+    """The flags that can be 1: every one but the constant 0s."""
+    return [f for f in flags if not (isinstance(f, Const) and f.value == 0)]
+
+
+def any_flag(flags):
+    """The OR of ``flags``, without the constant 0s (:data:`NO_OVERFLOW` when none is left)."""
+    live = live_flags(flags)
+    return reduce(lambda a, b: a | b, live) if live else NO_OVERFLOW
 
 
 def _round_addend(value, shift, rounding):
@@ -46,11 +61,12 @@ def _round_addend(value, shift, rounding):
 def requantize(m, value, src_frac, fmt, *, name, cannot_overflow=False):
     """Write ``value * 2**-src_frac`` into ``fmt``: returns ``(result, overflowed)`` signals.
 
-    ``result`` is a ``signed(fmt.width)`` signal and ``overflowed`` a 1-bit signal, both driven
-    combinationally in ``m``. Overflow is detected from the bits above the target width (all
-    equal to the sign bit, or not), which is cheaper and shallower than a magnitude compare.
-    ``cannot_overflow``: the value always fits (the model's interval analysis says so): no
-    saturation, and the flag is 0.
+    ``result`` is a ``signed(fmt.width)`` signal, driven combinationally in ``m``, and
+    ``overflowed`` a 1-bit signal, or :data:`NO_OVERFLOW` when the write cannot overflow.
+    Overflow is detected from the bits above the target width (all equal to the sign bit, or
+    not), which is cheaper and shallower than a magnitude compare. ``cannot_overflow``: the
+    value always fits (the model's interval analysis says so): no saturation, and the flag is
+    :data:`NO_OVERFLOW`.
     """
     value = value.as_signed()
     shift = src_frac - fmt.frac_bits
@@ -66,11 +82,11 @@ def requantize(m, value, src_frac, fmt, *, name, cannot_overflow=False):
     rounded = Signal(signed(max(len(value), fmt.width)), name=f"{name}_rounded")
     m.d.comb += rounded.eq(value)
     result = Signal(signed(fmt.width), name=name)
-    overflowed = Signal(name=f"{name}_ovf")
     w = fmt.width
     if len(rounded) == w or cannot_overflow:
-        m.d.comb += [result.eq(rounded[:w]), overflowed.eq(0)]
-        return result, overflowed
+        m.d.comb += result.eq(rounded[:w])
+        return result, NO_OVERFLOW
+    overflowed = Signal(name=f"{name}_ovf")
     # the value fits iff bits [w-1:] are all equal (all copies of the sign bit)
     top = rounded[w - 1:]
     sign = rounded[-1]
@@ -142,8 +158,10 @@ class AmaranthOps(Ops):
         raise NotImplementedError(f"{name}: a square root is sequential; the core instantiates its square-root unit")
 
     def _any(self, flags):
+        if not live_flags(flags):
+            return NO_OVERFLOW
         flag = Signal(name=f"{self.prefix}overflow_any")
-        self.m.d.comb += flag.eq(reduce(lambda a, b: a | b, flags, Const(0, 1)))
+        self.m.d.comb += flag.eq(any_flag(flags))
         return flag
 
     def hold(self, value, name):

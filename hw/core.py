@@ -19,7 +19,7 @@ from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from kfpga.ads8364 import CODE_FORMAT
-from kfpga.hw.arith import AmaranthOps
+from kfpga.hw.arith import NO_OVERFLOW, AmaranthOps, any_flag, live_flags
 from kfpga.hw.layouts import channel_bits, input_layout, output_layout
 from kfpga.hw.storage import MAX_REGISTER_CHANNELS, StateMemory, at, check_channels, select, state_array
 from kfpga.ops import Fx
@@ -32,21 +32,30 @@ def write_estimate(m, core, channel, outputs, flags):
 
     The flags are registered one by one and ORed after the register (see
     :meth:`Core.flag_outputs`): an OR tree after the saturations would lengthen the last
-    stage's path by its depth.
+    stage's path by its depth. Constant-0 flags get no register bit.
     """
-    m.d.sync += [core.o.payload.channel.eq(channel), core.o_flags.eq(Cat(*flags))]
+    m.d.sync += core.o.payload.channel.eq(channel)
+    live = live_flags(flags)
+    if len(live) != core.flag_count:
+        raise ValueError(f"{len(live)} overflow flags for the {core.flag_count} bits of flag_outputs()")
+    if live:
+        m.d.sync += core.o_flags.eq(Cat(*live))
     m.d.sync += [getattr(core.o.payload, name).eq(value.raw) for name, value in outputs.items()]
 
 
 def register_stage(m, advance, tag, valid, channel, flags, live):
     """A pipeline register stage, loaded when ``advance``: every live value (an
     :class:`~kfpga.ops.Fx` keeps its binary point; a condition stays one bit), the valid bit, the
-    channel and the flags so far. Returns ``(valid, channel, flags, live)`` of the registers."""
-    r_valid, r_flags = Signal(name=f"r{tag}_valid"), Signal(name=f"r{tag}_flags")
+    channel and the flags so far (no register when they are the constant 0). Returns
+    ``(valid, channel, flags, live)`` of the registers."""
+    r_valid = Signal(name=f"r{tag}_valid")
+    r_flags = Signal(name=f"r{tag}_flags") if live_flags([flags]) else NO_OVERFLOW
     r_channel = Signal.like(channel, name=f"r{tag}_channel")
     held = {}
     with m.If(advance):
-        m.d.sync += [r_valid.eq(valid), r_channel.eq(channel), r_flags.eq(flags)]
+        m.d.sync += [r_valid.eq(valid), r_channel.eq(channel)]
+        if r_flags is not NO_OVERFLOW:
+            m.d.sync += r_flags.eq(flags)
         for key, value in live.items():
             if isinstance(value, Fx):
                 reg = Signal(signed(len(value.raw)), name=f"r{tag}_{key}")
@@ -95,9 +104,16 @@ class Core(wiring.Component):
         """The operations layer's Amaranth backend for a stage of this core (:class:`AmaranthOps`)."""
         return AmaranthOps(m, self.config.formats, prefix=prefix, overflow_sites=self.overflow_sites)
 
-    def flag_outputs(self, m, count):
-        """``o.payload.overflow`` and the sticky ``overflow`` from ``count`` registered flag bits."""
-        self.o_flags = Signal(count, name="o_flags")
+    def flag_outputs(self, m, flags):
+        """``o.payload.overflow`` and the sticky ``overflow`` from the registered bits of ``flags``
+        (the values :func:`write_estimate` registers; the constant 0s get no bit). With none
+        left, no write of this core can overflow, and both outputs are 0."""
+        self.flag_count = len(live_flags(flags))
+        if not self.flag_count:
+            self.o_flags = None
+            m.d.comb += [self.o.payload.overflow.eq(0), self.overflow.eq(0)]
+            return
+        self.o_flags = Signal(self.flag_count, name="o_flags")
         sticky = Signal(name="sticky")
         word = Signal(name="word_overflow")
         m.d.comb += [word.eq(self.o_flags.any()), self.o.payload.overflow.eq(word),
@@ -213,7 +229,7 @@ class LoopPipeline(Core):
             live.update(memory.values(m, s0.channel))
         else:
             live.update({name: self._state_value(regs, name, s0.channel) for name in regs})
-        valid, channel, flags = s0_valid & ~hazard, s0.channel, Const(0, 1)
+        valid, channel, flags = s0_valid & ~hazard, s0.channel, NO_OVERFLOW
         in_flight = []  # (valid, channel) of the samples before their write-back
         groups, start = [], 0
         for cut in (*self.cuts[self.stages], len(self.steps)):
@@ -232,7 +248,7 @@ class LoopPipeline(Core):
             if n == len(groups):
                 last_flags = [flag for _, flag in ops.flags]
                 break
-            flags = flags | ops.overflow()
+            flags = any_flag([flags, ops.overflow()])
             later = set().union(*self.reads[self.steps.index(group[-1]) + 1:], self.carry) - reread
             live = {name: value for name, value in live.items() if name in later}
             valid, channel, flags, live = register_stage(m, advance, n, valid, channel, flags, live)
@@ -260,10 +276,9 @@ class LoopPipeline(Core):
             out = step(ops, ops.constants(self.constants), out)
             pending += [flag for _, flag in ops.flags]
             if n < len(steps):
-                combined = reduce(lambda a, b: a | b, pending, Const(0, 1))
-                valid, channel, flags, out = register_stage(m, advance, f"o{n}", valid, channel, combined, out)
+                valid, channel, flags, out = register_stage(m, advance, f"o{n}", valid, channel, any_flag(pending), out)
                 pending = [flags]
-        self.flag_outputs(m, len(pending))
+        self.flag_outputs(m, pending)
         with m.If(advance):
             m.d.sync += self.o.valid.eq(valid)
             with m.If(valid):

@@ -15,6 +15,7 @@ from typing import ClassVar
 from amaranth import Cat, Const, Module, Mux, Signal, signed
 
 from kfpga.ads8364 import CODE_FORMAT
+from kfpga.hw.arith import live_flags
 from kfpga.hw.core import Core, LoopPipeline, write_estimate
 from kfpga.hw.divider import Divider
 from kfpga.hw.storage import at, select
@@ -194,9 +195,12 @@ class FullCore(Core):
         step_flags = []
 
         def keep_flags(ops, tag):
-            reg = Signal(max(len(ops.flags), 1), name=f"{tag}_flags")
+            live = live_flags([flag for _, flag in ops.flags])
+            if not live:
+                return []  # no write of the step can overflow: no register
+            reg = Signal(len(live), name=f"{tag}_flags")
             step_flags.append(reg)
-            return reg.eq(Cat(*(flag for _, flag in ops.flags)) if ops.flags else 0)
+            return [reg.eq(Cat(*live))]
 
         def fx(signal, point):
             return Fx(signal.as_signed(), f[point].frac_bits, None, f[point], point)
@@ -274,11 +278,14 @@ class FullCore(Core):
         # -- WB: the corrections from the registered products ------------------------------------------------
         wb = self.arith(m, prefix="wb_")
         state = eq.update_corrections(wb, k, xl_r, pl_r, products)
-        wb_bits = Signal(len(wb.flags), name="wb_flags")
+        wb_live = live_flags([flag for _, flag in wb.flags])
+        wb_bits = Signal(max(len(wb_live), 1), name="wb_flags")
         done = {nm: Signal(signed(f[self.state_points[nm]].width), name=f"{nm}_done") for nm in (f"x{i + 1}" for i in range(n))}
 
         div_flags = Signal(name="div_flags")
-        self.flag_outputs(m, 4 + 2)
+        kept = {tag: keep_flags(ops, tag) for tag, ops in (("t1", t1), ("t2", t2), ("t3", t3), ("t4", t4))}
+        out_flags = [r.any() for r in step_flags] + [div_flags] + ([wb_bits.any()] if wb_live else [])
+        self.flag_outputs(m, out_flags)
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
 
@@ -290,21 +297,21 @@ class FullCore(Core):
                     m.next = "T1"
             with m.State("T1"):
                 m.d.sync += [a for _, a in xl_sum] + [a for row in fp for _, a in row]
-                m.d.sync += keep_flags(t1, "t1")
+                m.d.sync += kept["t1"]
                 m.next = "T2"
             with m.State("T2"):
                 m.d.sync += [a for _, a in xl] + [a for _, a in pl_sum.values()]
-                m.d.sync += keep_flags(t2, "t2")
+                m.d.sync += kept["t2"]
                 m.next = "T3"
             with m.State("T3"):
                 m.d.sync += [a for _, a in pl.values()] + [yh_assign, e_assign]
-                m.d.sync += keep_flags(t3, "t3")
+                m.d.sync += kept["t3"]
                 m.next = "T4"
             with m.State("T4"):
                 m.d.sync += [nums[i].eq(magnitude(hp[0][i].raw, shifts[i])) for i in range(n)]
                 m.d.sync += [hp_r[j].eq(hp[0][j].raw) for j in range(n)]
                 m.d.sync += [hp_sign.eq(Cat(*(hp[0][i].raw < 0 for i in range(n)))), index.eq(0)]
-                m.d.sync += [den.eq(Mux(s.raw > 0, s.raw.as_unsigned(), 0)), keep_flags(t4, "t4"),
+                m.d.sync += [den.eq(Mux(s.raw > 0, s.raw.as_unsigned(), 0)), *kept["t4"],
                              div_flags.eq(0)]
                 m.next = "GO"  # S <= 0 becomes a zero divisor (the quotient saturates)
             with m.State("GO"):
@@ -332,14 +339,15 @@ class FullCore(Core):
             with m.State("WB"):
                 m.d.sync += [at(regs[nm], channel).eq(state[nm].raw) for nm in names]
                 m.d.sync += [done[nm].eq(state[nm].raw) for nm in done]
-                m.d.sync += wb_bits.eq(Cat(*(flag for _, flag in wb.flags)))
+                if wb_live:
+                    m.d.sync += wb_bits.eq(Cat(*wb_live))
                 m.next = "OUT"
             with m.State("OUT"):
                 with m.If(~self.o.valid | self.o.ready):
                     m.d.sync += self.o.valid.eq(1)
                     outputs = {nm: Fx(done[nm], 0) for nm in done}
                     outputs["yhat1"] = yh_r
-                    write_estimate(m, self, channel, outputs, [r.any() for r in step_flags] + [div_flags, wb_bits.any()])
+                    write_estimate(m, self, channel, outputs, out_flags)
                     m.next = "IDLE"
         # plain assignments (Verilog `assign`), not case-statement outputs: no simulator can
         # leave them undefined at time zero while the state has not changed yet

@@ -17,9 +17,10 @@ from __future__ import annotations
 from types import MappingProxyType
 from typing import ClassVar
 
-from amaranth import Cat, Const, Module, Mux, Signal, signed
+from amaranth import Cat, Module, Mux, Signal, signed
 
 from kfpga.ads8364 import CODE_FORMAT
+from kfpga.hw.arith import NO_OVERFLOW, any_flag, live_flags
 from kfpga.hw.core import Core, LoopPipeline, write_estimate
 from kfpga.hw.divider import Divider
 from kfpga.hw.storage import at, select
@@ -229,7 +230,9 @@ class FullKalman(Core):
         next_state = dict(zip(names, (x1_n, v_n, *p_n), strict=True))
         # the flags of WB are registered one by one and ORed in the next cycle: an OR tree
         # after the saturations would lengthen WB's path by two LUT levels
-        wb_bits = Signal(len(wb.flags), name="wb_flags")
+        wb_live = live_flags([flag for _, flag in wb.flags])
+        wb_bits = Signal(len(wb_live), name="wb_flags") if wb_live else None
+        wb_any = wb_bits.any() if wb_live else NO_OVERFLOW
 
         # -- x2 = v / T from the new v: free when T = 2**k, else three steps ---------------------
         v_done = Signal(signed(f["v"].width), name="v_done")
@@ -240,21 +243,22 @@ class FullKalman(Core):
             operand, op_assign = rate_ops[0].hold(eq.rate_operand(rate_ops[0], k, v_done_fx), "vt")
             product, pr_assign = rate_ops[1].hold(eq.rate_product(rate_ops[1], k, operand), "vt_inv_t")
             x2_n = eq.rate_write(rate_ops[2], k, product)
-            rate_flags = [rate_ops[0].overflow(), Const(0, 1), rate_ops[2].overflow()]
+            rate_flags = [rate_ops[0].overflow(), NO_OVERFLOW, rate_ops[2].overflow()]
+            out_flags = [flags, rate_flags[2]]
         else:
             x2_n = eq.rate(rate_ops[0], k, v_done_fx)
             rate_flags = [rate_ops[0].overflow()]
+            out_flags = [flags, wb_any, rate_flags[0]]
 
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
 
-        self.flag_outputs(m, 3)
+        self.flag_outputs(m, out_flags)
 
-        def emit(x2, *extra_flags):
+        def emit(x2):
             with m.If(~self.o.valid | self.o.ready):
                 m.d.sync += self.o.valid.eq(1)
-                write_estimate(m, self, channel, {"x1": Fx(x1_done, 0), "x2": x2, "yhat": xl1_r},
-                               [flags, *extra_flags, *[Const(0, 1)] * (2 - len(extra_flags))])
+                write_estimate(m, self, channel, {"x1": Fx(x1_done, 0), "x2": x2, "yhat": xl1_r}, out_flags)
                 m.next = "IDLE"
 
         with m.FSM(name="schedule") as fsm:
@@ -265,10 +269,10 @@ class FullKalman(Core):
                     m.next = "TU1"
             with m.State("TU1"):
                 m.d.sync += [assign for _, assign in held1]
-                m.d.sync += flags.eq(tu1.overflow())
+                m.d.sync += flags.eq(tu1.overflow())  # the constant 0 when no TU1 write can overflow
                 m.next = "TU2"
             with m.State("TU2"):
-                m.d.sync += [e_assign, flags.eq(flags | tu2.overflow()),
+                m.d.sync += [e_assign, flags.eq(any_flag([flags, tu2.overflow()])),
                              num1.eq(dividend(pl11_r.raw)), num2.eq(dividend(pl21_r.raw)),
                              den.eq(Mux(s.raw > 0, s.raw.as_unsigned(), 0))]  # S <= 0: a zero divisor (saturates)
                 m.next = "GO"
@@ -287,20 +291,22 @@ class FullKalman(Core):
                 m.next = "WB"
             with m.State("WB"):
                 m.d.sync += [at(regs[n], channel).eq(next_state[n].raw) for n in names]
-                m.d.sync += [v_done.eq(v_n.raw), x1_done.eq(x1_n.raw), wb_bits.eq(Cat(*(f for _, f in wb.flags)))]
+                m.d.sync += [v_done.eq(v_n.raw), x1_done.eq(x1_n.raw)]
+                if wb_live:
+                    m.d.sync += wb_bits.eq(Cat(*wb_live))
                 m.next = "X1"
             with m.State("X1"):
                 if self.rate_steps:
-                    m.d.sync += [op_assign, flags.eq(flags | wb_bits.any() | rate_flags[0])]
+                    m.d.sync += [op_assign, flags.eq(any_flag([flags, wb_any, rate_flags[0]]))]
                     m.next = "X2"
                 else:
-                    emit(x2_n, wb_bits.any(), rate_flags[0])
+                    emit(x2_n)
             if self.rate_steps:
                 with m.State("X2"):
                     m.d.sync += pr_assign
                     m.next = "X3"
                 with m.State("X3"):
-                    emit(x2_n, rate_flags[2])
+                    emit(x2_n)
         # plain assignments (Verilog `assign`), not case-statement outputs: no simulator can
         # leave them undefined at time zero while the state has not changed yet
         m.d.comb += [

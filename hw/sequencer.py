@@ -300,7 +300,7 @@ class SequentialCore(Core):
 
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
-        self.flag_outputs(m, 1)
+        self.flag_outputs(m, [flags])
         with m.FSM(name="schedule") as fsm:
             with m.State("INIT"):  # every channel's reset state into the register file
                 write(Const(p.state_base, abits) | init_count, select(reset_values, init_count[:p.state_bits]))

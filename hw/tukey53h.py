@@ -23,11 +23,10 @@ The median networks need 7 + 3 comparators, the threshold test one more; no mult
 
 from __future__ import annotations
 
-from functools import reduce
-
 from amaranth import Const, Module, Signal
 
 from kfpga.ads8364 import CODE_FORMAT
+from kfpga.hw.arith import any_flag
 from kfpga.hw.core import Core, register_stage, write_estimate
 from kfpga.hw.storage import at, check_channels
 from kfpga.model import tukey53h as eq
@@ -141,11 +140,10 @@ class Tukey53HCore(Core):
             if n == len(self._stages):
                 pending += flags
                 break
-            combined = reduce(lambda a, b: a | b, [*pending, *flags], Const(0, 1))
-            valid, channel, flags, live = register_stage(m, advance, n, valid, channel, combined, live)
+            valid, channel, flags, live = register_stage(m, advance, n, valid, channel, any_flag([*pending, *flags]), live)
             pending = [flags]
             in_range = channel < self.channels if 1 < self.channels < 2 ** len(channel) else Const(1, 1)
-        self.flag_outputs(m, len(pending))
+        self.flag_outputs(m, pending)
         with m.If(advance):
             m.d.sync += self.o.valid.eq(valid)
             with m.If(valid):
