@@ -71,7 +71,7 @@ def blocks():
     from kfpga.hw.clockdiv import ClockDivider
     from kfpga.hw.divider import Divider
     from kfpga.hw.generate import TOP_NAME
-    from kfpga.hw.kalman2 import FullKalman, SteadyKalman
+    from kfpga.hw.kalman2 import FullKalman
     from kfpga.hw.top import AdcFrontend, FilterSystem
     from kfpga.sim.sources import stress_codes, threshold_codes
 
@@ -85,16 +85,23 @@ def blocks():
     # the other filters' cores on their core bench; their formal harnesses hold other instances
     # (the defaults' widths and channels, a narrow 53H, the sequential core's handshake twin),
     # where this instance's cells are not, so no property kills here
-    # the alpha-beta core with v a bit narrower than its range: its write then saturates on its
-    # own on some stress samples (at the defaults no stress sample saturates v alone)
-    ab = FilterConfig(filter="alpha-beta")
-    ab = FilterConfig(filter="alpha-beta", formats={**ab.formats, "v": QFormat(16, ab.formats["v"].frac_bits)},
-                      check_ranges=False)
+    # the steady-state cores with the state narrower than its range (x1 and xl1 Q15, v Q12, e Q13
+    # or Q14): at the defaults no stress sample saturates xl1, x1 or v, whose saturation logic no
+    # bench could then reach; so narrowed, each of the four writes saturates, some samples with no
+    # other (its own flag alone on the estimate), in 1,200 stress samples
+    def stressed(filt, e_bits):
+        base = FilterConfig(filter=filt)
+        narrow = {"x1": 15, "xl1": 15, "v": 12, "e": e_bits}
+        return FilterConfig(filter=filt, check_ranges=False,
+                            formats={**base.formats, **{p: QFormat(i, base.formats[p].frac_bits) for p, i in narrow.items()}})
+
+    steady, ab = stressed("kalman2", 13), stressed("alpha-beta", 14)
     # the 53H core with two channels (its channel pipeline then carries a bit), on stress codes and
     # spikes at its threshold's boundary, both signs
     tukey = FilterConfig(filter="53h")
     boundary = [int(c) for c in np.r_[stress_codes(1, 300), threshold_codes(1, 480, tukey.params.threshold, hold=24)]]
-    others = [(ab, "steady", "alpha-beta core", {"samples": 600}, 1),
+    others = [(steady, "steady", "steady core", {"samples": 1200}, 1),
+              (ab, "steady", "alpha-beta core", {"samples": 1200}, 1),
               (tukey, "online", "53h core", {"codes": boundary, "order": "round-robin"}, 2),
               (FilterConfig(filter="ls-frontend"), "steady", "sequential core (ls-frontend)", {"samples": 120}, 1)]
     cores = [Block(name, "core", {"variant": variant, "channels": channels, "config": cfg},
@@ -113,9 +120,6 @@ def blocks():
         Block("restoring divider", "restoring", widths, lambda: Divider(**widths), "kfpga_restoring", "",
               "test_restoring", {**widths, "samples": 1500, "p_idle": 0.2, "p_ready": 0.7}, None,
               f"divider {widths['dividend_bits']}/{widths['divisor_bits']}->{widths['quotient_bits']}"),
-        Block("steady core", "core", {"variant": "steady", "channels": 1}, lambda: SteadyKalman(config), "kfpga_core", "",
-              "test_core", {"variant": "steady", "samples": 600, "p_idle": 0.2, "p_ready": 0.7}, None,
-              "kalman2 steady core", sample_bits(SteadyKalman(config))),
         Block("full core", "core", {"variant": "full", "channels": 1}, lambda: FullKalman(narrow), "kfpga_core", "",
               "test_core", {"variant": "full", "samples": 150, "p_idle": 0.2, "p_ready": 0.7,
                             "config_toml": narrow.to_toml(), "check_ranges": False}, None,
@@ -261,12 +265,15 @@ def _equivalence(block, line, mdir, folder):
         return {"result": "survived", "by": None, "detail": "a clock mutant: the equivalence checks model one clock"}
     # first the fast check: the two designs' registers matched by name (Yosys's equiv_induct)
     # proves the mutants that change no reachable state, and those whose change goes nowhere
-    # (logic that reaches no output is removed first: a changed bit of an unrouted field)
-    ok, _ = _yosys("read_rtlil gold.il\nread_rtlil gate.il\nopt_clean -purge\nequiv_make gold gate equiv\n"
-                   "hierarchy -top equiv\nasync2sync\nequiv_simple -seq 5\nequiv_induct -seq 5\nequiv_status -assert\n",
-                   mdir)
-    if ok:
-        return {"result": "equivalent", "by": "Yosys equiv_induct (registers matched)"}
+    # (logic that reaches no output is removed first: a changed bit of an unrouted field).
+    # Memories become registers, one per word (memory_map). It assumes that matched registers
+    # start equal, so it does not apply to a change of a memory's initial contents.
+    if not _changes_memory_contents(line, folder):
+        ok, _ = _yosys("read_rtlil gold.il\nread_rtlil gate.il\nmemory_collect\nmemory_map\nopt_clean -purge\n"
+                       "equiv_make gold gate equiv\nhierarchy -top equiv\nasync2sync\nequiv_simple -seq 5\n"
+                       "equiv_induct -seq 5\nequiv_status -assert\n", mdir)
+        if ok:
+            return {"result": "equivalent", "by": "Yosys equiv_induct (registers matched)"}
     # a change in the logic that does not depend on the samples (a time-varying core's covariance
     # and gains): every reachable state of that logic, searched (kfpga/reach.py)
     verdict = _data_independent(block, line, mdir) if block.data else None
@@ -288,17 +295,37 @@ def _equivalence(block, line, mdir, folder):
     return {"result": "survived", "by": None, "detail": "equivalence not proven"}
 
 
+def _changes_memory_contents(line, folder):
+    """Whether the ``mutate`` line changes a memory's initial contents (a ``$meminit`` cell)."""
+    cell = re.search(r"-cell (\S+)", line)
+    text = (folder / "design.il").read_text()
+    return bool(cell) and re.search(rf"^\s*cell \$meminit\S* {re.escape(cell.group(1))}$", text, re.M) is not None
+
+
 def _data_independent(block, line, mdir):
-    """:func:`kfpga.reach.check` of the mutant against the original (``None`` when the mutation
-    does not apply to the flattened design: a change at a submodule's port)."""
+    """:func:`kfpga.reach.check` of the mutant against the original (``None`` when the netlists
+    cannot be read).
+
+    The mutation is made on the flattened original, so that every other cell keeps its name;
+    where it does not apply there (a change at a submodule's port, or in logic that ``proc``
+    folds to constants, such as a multiplexer of constants), both are flattened again from the
+    block's RTLIL without that folding (``proc -noopt``), the mutation made before, and their
+    generated names are matched by their order of creation."""
     from kfpga import reach
 
     mutation = line.replace(f"-module {block.target} ", "-module gate ")
     ok, _ = _yosys(f"read_rtlil gold.il\nrename gold gate\n{mutation}\nwrite_rtlil gate_reach.il\n", mdir)
+    gold = "gold.il"
     if not ok:
-        return None
+        gold = "gold_unfolded.il"
+        for side, change in (("gold", ""), ("gate", f"{line}\n")):
+            ok, _ = _yosys(f"read_rtlil design.il\n{change}hierarchy -top {block.target}\nproc -norom -noopt\nflatten\n"
+                           f"rename {block.target} {side}\nwrite_rtlil {side}_unfolded.il\n", mdir)
+            if not ok:
+                return None
     try:
-        return reach.check(reach.netlist_json("gold.il", "gate_reach.il", mdir), block.data)
+        return reach.check(reach.netlist_json(gold, "gate_reach.il" if gold == "gold.il" else "gate_unfolded.il", mdir),
+                           block.data)
     except (RuntimeError, ValueError):  # a netlist the search cannot read: not decided here
         return None
 

@@ -29,6 +29,7 @@ library: no Python simulator reads a Yosys netlist and lets a search set and sav
 from __future__ import annotations
 
 import json
+import re
 from collections import deque
 from dataclasses import dataclass
 
@@ -55,14 +56,57 @@ class Verdict:
     states: int = 0
 
 
+#: The cells that feed a memory's initial contents, and the wires between (a Yosys selection).
+_INIT_GATES = "t:$meminit_v2 %ci2:+$meminit_v2[DATA] %ci1"
+
+
 def netlist_json(gold_il, gate_il, folder):
-    """Write the flat RTLIL modules ``gold`` and ``gate`` as one Yosys JSON file; its path."""
+    """Write the flat RTLIL modules ``gold`` and ``gate`` as one Yosys JSON file; its path.
+
+    Memories become registers, one per word, and multiplexers (Yosys's ``memory_map``): a ROM's
+    words are then data-independent registers that keep their initial contents, and a RAM's
+    words data-path registers. The cells the mapping creates are named by a counter that the
+    mutant's extra cells move on, so they are renamed by their order of creation, the same in
+    both designs.
+    """
     from kfpga.formal import yosys
 
-    ok, log = yosys(f"read_rtlil {gold_il}\nread_rtlil {gate_il}\nwrite_json pair.json\n", folder)
+    for side, il in (("gold", gold_il), ("gate", gate_il)):
+        # a mutation of a memory's initial contents may leave a gate on a constant (inv, cnot):
+        # folded first, since a memory takes only constant contents
+        ok, log = yosys(f"read_rtlil {il}\nopt_expr {_INIT_GATES}\nopt_clean\nmemory_collect\nmemory_map\n"
+                        f"write_rtlil {side}_mapped.il\n", folder)
+        if not ok:
+            raise RuntimeError(f"the memories of {il} could not be mapped: {log.strip()[-300:]}")
+    ok, log = yosys("read_rtlil gold_mapped.il\nread_rtlil gate_mapped.il\nwrite_json pair.json\n", folder)
     if not ok:
         raise RuntimeError(f"the designs could not be read: {log.strip()[-300:]}")
-    return folder / "pair.json"
+    path = folder / "pair.json"
+    design = json.loads(path.read_text())
+    gold, gate = design["modules"]["gold"]["cells"], design["modules"]["gate"]["cells"]
+    # every generated name, by its name without the counter (a name both designs have may be two
+    # different cells, one counter apart)
+    groups = {}
+    for side, cells in (("gold", gold), ("gate", gate)):
+        for name in cells:
+            if m := _COUNTED.match(name):
+                stem = m.group(1) + "$" + (m.group(3) or "")
+                groups.setdefault(stem, {"gold": [], "gate": []})[side].append((int(m.group(2)), name))
+    renamed = {"gold": {}, "gate": {}}
+    for stem, sides in groups.items():
+        if len(sides["gold"]) == len(sides["gate"]):  # created in the same order in both
+            for side, named in sides.items():
+                renamed[side].update({name: f"{stem}#{k}" for k, (_, name) in enumerate(sorted(named))})
+    for side in ("gold", "gate"):
+        module = design["modules"][side]
+        module["cells"] = {renamed[side].get(name, name): cell for name, cell in module["cells"].items()}
+    matched = folder / "pair_matched.json"  # (pair.json keeps Yosys's names)
+    matched.write_text(json.dumps(design))
+    return matched
+
+
+#: A generated name: before its counter, the counter, and a suffix (``$procmux$12_CMP0``).
+_COUNTED = re.compile(r"^(.*)\$(\d+)(_[A-Z0-9_]+)?$")
 
 
 def _int(value):
@@ -274,17 +318,14 @@ class Program:
     init: int
     control: tuple  # ((port, bit), ...)
     layout: tuple  # ((cell key, offset, width, mask), ...)
-    compared: int
+    followed: int  # cells of the data path whose "may differ" bit the search carries
     net: object
-    readers: tuple = ()  # what reads each compared bit: "cell name" or "output port"
-    differ: list = None  # after a step gave None: the XOR of gold's and gate's compared bits
+    readers: tuple = ()
+    differ: list = None  # after a step gave None: ("differs" or "may differ", output port)
 
     def differences(self):
-        """What read different values at the last step that gave ``None``."""
-        if not self.differ:
-            return []
-        x = self.differ[-1]
-        return sorted({self.readers[i] for i in range(len(self.readers)) if (x >> i) & 1})
+        """What the last step that gave ``None`` found: ``(kind, output port)``."""
+        return self.differ[-1] if self.differ else None
 
     def inputs(self, **values):
         """The inputs word of ``port=value`` (ports left out are 0)."""
@@ -298,6 +339,14 @@ class Program:
             for i, q in enumerate(self.net.cells[key]["connections"]["Q"]):
                 where[q] = off + i
         return sum(((state >> where[b]) & 1) << i for i, b in enumerate(bits))
+
+
+def _powers_up_cleared(name):
+    """Whether register ``name``, which has no power-up value in the netlist, powers up 0: a
+    memory's read register (``memory_map`` names it ``...$rdreg[k]``; Amaranth gives a read port
+    none), which on the target, as every register of an Altera device's core and every M4K output
+    register, powers up cleared (AN 252, table 1). Gold's and gate's are then the same 0."""
+    return "$rdreg[" in name
 
 
 def _compile(net, control):
@@ -318,6 +367,14 @@ def _compile(net, control):
         for i, q in enumerate(cell["connections"]["Q"]):
             if q not in tainted:
                 bit = net.init.get(q)
+                twin = net.cells.get(("gold", key[1])) if key[0] == "gate" else None
+                if bit is None and twin is not None and twin["type"] == "$dff":
+                    # a mutation of the register's output port leaves it on a new net, without the
+                    # init attribute; a mutation rewires, it never changes a power-up value, so
+                    # the register starts as its gold twin does
+                    bit = net.init.get(twin["connections"]["Q"][i])
+                if bit is None and _powers_up_cleared(key[1]):
+                    bit = "0"
                 if bit not in ("0", "1"):
                     raise _NotApplicable(f"register {key[1]} has no reset value for bit {i}")
                 mask |= 1 << i
@@ -335,6 +392,8 @@ def _compile(net, control):
             return control_var[bit]
         if bit[0] == "in":
             raise _NotApplicable(f"input {bit[1]}[{bit[2]}] is read but is neither data nor a control input")
+        if bit not in net.driver:
+            return None  # an undriven bit (x): both designs alike read it as 0
         key, _, index = net.driver[bit]
         return variables[key], index
 
@@ -351,7 +410,7 @@ def _compile(net, control):
             for port, bits in cell["connections"].items():
                 if cell["port_directions"][port] == "input":
                     for b in bits:
-                        if isinstance(b, tuple) and b[0] != "in" and b not in tainted:
+                        if isinstance(b, tuple) and b[0] != "in" and b not in tainted and b in net.driver:
                             visit(net.driver[b][0])
         visiting.discard(key)
         done.add(key)
@@ -379,56 +438,137 @@ def _compile(net, control):
         else:
             widths = (len(conn.get("A", [])), len(conn.get("B", [])), len(conn["Y"]))
             lines.append(f"    {variables[key]} = {_cell_expr(cell['type'], p, a, b, s, widths)}")
-    gold_bits, gate_bits, readers = _interface(net)
-    if gold_bits:
-        lines.append(f"    _g, _t = {_bits_expr(gold_bits, source)}, {_bits_expr(gate_bits, source)}")
-        lines.append("    if _g != _t:")
-        lines.append("        _differ.append(_g ^ _t)")
-        lines.append("        return None")
+    prop = _propagation(net, source, offset)
+    lines[1:1] = prop["read"]
+    lines += prop["lines"]
     nxt = []
     for key, off, _, mask in layout:
         d = _bits_expr(di[key]["connections"]["D"], source)
         nxt.append(f"((({d}) & {mask}) << {off})" if off else f"(({d}) & {mask})")
+    nxt += [f"(({d}) << {at})" for d, at in prop["next"]]
     lines.append("    return " + (" | ".join(nxt) if nxt else "0"))
     differ = []
     scope = {"_sx": _sx, "_shift": _shift, "_differ": differ}
     exec(compile("\n".join(lines), "<reach step>", "exec"), scope)  # the step, generated from the netlist above
-    return Program(scope["step"], init, tuple(control), tuple(layout), len(gold_bits), net, tuple(readers), differ)
+    return Program(scope["step"], init | prop["init"], tuple(control), tuple(layout), prop["followed"], net,
+                   (), differ)
 
 
-def _interface(net):
-    """``(gold bits, gate bits)``: every data-independent bit that the data path (a cell with an
-    output bit that depends on the data) or an output reads in gold, and the same bit in gate."""
+def _propagation(net, source, base):
+    """The step's lines that carry a *may differ* bit through the data path, the cells with an
+    output bit that depends on the data.
+
+    Gold's and gate's data paths are the same cells on the same samples, so a data-path value can
+    differ only if something it reads does: a data-independent value that differs between the two
+    (computed exactly by the search), or a data-path value that may differ. A multiplexer whose
+    select is data-independent and the same in both passes on only the chosen input's bit, so a
+    value that differs but is not chosen (an operand an instruction does not use, a memory word
+    not addressed) goes no further; any other cell's output may differ when one of its inputs
+    may. A data-path register keeps the bit in the search state, starting at 1 when its power-up
+    values differ (a memory word's initial contents). A step that lets a possible difference
+    reach an output gives ``None``: the mutant is then not proven equivalent here.
+    """
     tainted = net.tainted
-    gold_bits, gate_bits, readers = [], [], []
-
-    def pair(g, t, where):
-        if (g in tainted) != (t in tainted):
-            raise _NotApplicable(f"{where} depends on the data in one design only")
-        if g not in tainted:
-            gold_bits.append(g)
-            gate_bits.append(t)
-            readers.append(where)
-
+    pairs = {}
     for (side, name), cell in net.cells.items():
-        if side != "gold":
+        if side == "gold" and any(b in tainted for b in _outputs(cell)):
+            twin = net.cells.get(("gate", name))
+            if twin is None or twin["type"] != cell["type"]:
+                raise _NotApplicable(f"cell {name} has no twin in the mutant")
+            pairs[name] = (cell, twin)
+    var = {name: f"_d{i}" for i, name in enumerate(pairs)}
+    regs = [name for name, (cell, _) in pairs.items() if cell["type"] == "$dff"]
+    where = {name: base + j for j, name in enumerate(regs)}
+
+    def diff(gbits, tbits):
+        """The expression of 'some bit of gold's gbits may differ from gate's tbits'."""
+        terms, gold_di, gate_di = set(), [], []
+        for g, t in zip(gbits, tbits, strict=True):
+            if (g in tainted) != (t in tainted):
+                return "1"
+            if g not in tainted:
+                gold_di.append(g)
+                gate_di.append(t)
+            elif g != t:  # (a shared sample input bit is the same in both)
+                dg, dt = net.driver.get(g), net.driver.get(t)
+                if dg is None or dt is None or dg[0][1] != dt[0][1] or dg[1:] != dt[1:]:
+                    return "1"
+                terms.add(var[dg[0][1]])
+        if gold_di:
+            terms.add(f"int(({_bits_expr(gold_di, source)}) != ({_bits_expr(gate_di, source)}))")
+        return " | ".join(sorted(terms)) if terms else "0"
+
+    def inputs(cell, twin):
+        return [(bits, twin["connections"][port]) for port, bits in cell["connections"].items()
+                if cell["port_directions"][port] == "input"]
+
+    order, done = [], set()
+
+    def visit(name):
+        stack = [(name, False)]
+        while stack:  # depth first, without recursion: a data path can be thousands of cells deep
+            key, expanded = stack.pop()
+            if key in done:
+                continue
+            if expanded:
+                done.add(key)
+                order.append(key)
+                continue
+            stack.append((key, True))
+            cell = pairs[key][0]
+            if cell["type"] != "$dff":
+                for bits, _ in inputs(*pairs[key]):
+                    for b in bits:
+                        if b in tainted and isinstance(b, tuple) and b[0] != "in":
+                            driver = net.driver[b][0][1]
+                            if driver not in done and pairs[driver][0]["type"] != "$dff":
+                                stack.append((driver, False))
+
+    for name in pairs:
+        visit(name)
+    read = [f"    {var[name]} = (_s >> {where[name]}) & 1" for name in regs]
+    lines = []
+    for name in order:
+        cell, twin = pairs[name]
+        if cell["type"] == "$dff":
             continue
-        twin = net.cells.get(("gate", name))
-        if twin is None or twin["type"] != cell["type"]:
-            raise _NotApplicable(f"cell {name} has no twin in the mutant")
-        outs = _outputs(cell)
-        if any((a in tainted) != (b in tainted) for a, b in zip(outs, _outputs(twin), strict=True)):
-            raise _NotApplicable(f"an output of {name} depends on the data in one design only")
-        if cell["type"] == "$dff" or not any(b in tainted for b in outs):
-            continue  # state, or data-independent logic: searched, not read by the data path
-        for port, bits in cell["connections"].items():
-            if cell["port_directions"][port] == "input":
-                for g, t in zip(bits, twin["connections"][port], strict=True):
-                    pair(g, t, f"an input of {name}")
+        cg, ct = cell["connections"], twin["connections"]
+        select_known = "S" in cg and not any(b in tainted for b in (*cg["S"], *ct["S"]))
+        if cell["type"] == "$mux" and select_known:
+            sg, st = _bits_expr(cg["S"], source), _bits_expr(ct["S"], source)
+            expr = f"(({diff(cg['B'], ct['B'])}) if ({sg}) else ({diff(cg['A'], ct['A'])})) if ({sg}) == ({st}) else 1"
+        elif cell["type"] == "$pmux" and select_known:
+            width = len(cg["Y"])
+            sg, st = _bits_expr(cg["S"], source), _bits_expr(ct["S"], source)
+            # every input a set select bit chooses (one, if the select is one-hot as it should be)
+            terms = [f"(((_sg >> {k}) & 1) and ({diff(cg['B'][k * width:(k + 1) * width], ct['B'][k * width:(k + 1) * width])}))"
+                     for k in range(len(cg["S"]))]
+            terms.append(f"((_sg == 0) and ({diff(cg['A'], ct['A'])}))")
+            lines.append(f"    _sg, _st = {sg}, {st}")
+            expr = f"int({' or '.join(terms)}) if _sg == _st else 1"
+        else:
+            expr = " | ".join(f"({diff(g, t)})" for g, t in inputs(cell, twin)) or "0"
+        lines.append(f"    {var[name]} = {expr}")
     for port in net.outputs:
-        for g, t in zip(net.out_bits["gold"][port], net.out_bits["gate"][port], strict=True):
-            pair(g, t, f"output {port}")
-    return gold_bits, gate_bits, readers
+        gbits, tbits = net.out_bits["gold"][port], net.out_bits["gate"][port]
+        known = [(g, t) for g, t in zip(gbits, tbits, strict=True) if g not in tainted and t not in tainted]
+        if known:  # a data-independent output bit: exactly compared
+            g_expr = _bits_expr([g for g, _ in known], source)
+            t_expr = _bits_expr([t for _, t in known], source)
+            lines += [f"    if ({g_expr}) != ({t_expr}):", f"        _differ.append(('differs', {port!r}))",
+                      "        return None"]
+        rest = [(g, t) for g, t in zip(gbits, tbits, strict=True) if (g, t) not in known]
+        if rest:
+            lines += [f"    if {diff([g for g, _ in rest], [t for _, t in rest])}:",
+                      f"        _differ.append(('may differ', {port!r}))", "        return None"]
+    init = 0
+    for name in regs:
+        cell, twin = pairs[name]
+        qg, qt = cell["connections"]["Q"], twin["connections"]["Q"]
+        if any(g in tainted and net.init.get(g) != net.init.get(t, net.init.get(g)) for g, t in zip(qg, qt, strict=True)):
+            init |= 1 << where[name]
+    nxt = [(diff(pairs[name][0]["connections"]["D"], pairs[name][1]["connections"]["D"]), where[name]) for name in regs]
+    return {"read": read, "lines": lines, "next": nxt, "init": init, "followed": len(pairs)}
 
 
 def compile_pair(pair_path, data_inputs):
@@ -474,13 +614,17 @@ def check(pair_path, data_inputs, *, max_states=300_000):
         for inputs in combos:
             nxt = step(state, inputs)
             if nxt is None:
-                return Verdict(False, True, f"gold and gate give {', '.join(program.differences()[:3])} different "
-                                            f"values at a reachable state ({len(seen)} states searched)", len(seen))
+                kind, port = program.differences()
+                if kind == "differs":
+                    return Verdict(False, True, f"gold and gate give output {port} different values at a reachable "
+                                                f"state ({len(seen)} states searched)", len(seen))
+                return Verdict(False, False, f"a difference may reach output {port} through the data path "
+                                             f"({len(seen)} states searched)", len(seen))
             if nxt not in seen:
                 if len(seen) >= max_states:
                     return Verdict(False, False, f"more than {max_states} reachable states", len(seen))
                 seen.add(nxt)
                 queue.append(nxt)
     return Verdict(True, False, f"all {len(seen)} reachable states of the data-independent logic "
-                                f"({len(program.layout)} registers, {len(control)} control input bits) give the data "
-                                f"path and the outputs the same {program.compared} bits", len(seen))
+                                f"({len(program.layout)} registers, {len(control)} control input bits): no difference "
+                                f"reaches an output ({program.followed} cells of the data path followed)", len(seen))
