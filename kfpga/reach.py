@@ -9,17 +9,25 @@ can kill it; but neither k-induction nor a bounded check can show it: induction 
 states the trajectory never visits, and a bounded check would have to run through hundreds of
 cycles of divisions and products.
 
-This check decides such mutants exactly. On the miter of the original block (gold) and the
-mutant (gate), it marks every net that depends on a data input (the samples) and calls the rest
+This check decides such mutants. On the pair of the original block (gold) and the mutant
+(gate), it marks every net that depends on a data input (the samples) and calls the rest
 *data-independent*: its registers step from the reset state by the control inputs alone
 (valid, ready, channel, reset), whatever the samples are. When the mutation touches only
-data-independent logic, the two designs' data paths are the same logic, and they can differ only
-if one of them reads a data-independent value that differs between gold and gate. So the check
-enumerates every reachable state of the data-independent registers of both designs, under every
-combination of the control inputs, and compares at each step every data-independent value that
-the data path or an output reads, gold against gate. If the search ends (no new state) with no
-difference, the mutant is equivalent: no input sequence can tell them apart. If a difference
-appears, or the search exceeds its state budget, it is not proven here.
+data-independent logic, the two designs' data paths are the same logic on the same samples, and
+a data-path value can differ only if something it reads does. So the check enumerates every
+reachable state of the data-independent registers of both designs, under every combination of
+the control inputs, and carries with each a *may differ* bit for every data-path cell and
+register: set where a cell reads a data-independent value that differs between gold and gate,
+or a data-path value that may differ; not passed on by a multiplexer whose select is the same
+in both and chooses another input (an operand an instruction does not use, a memory word not
+addressed). If the search ends (no new state) and no difference ever reaches an output, the
+mutant is equivalent: no input sequence can tell them apart. If one may reach an output, or the
+search exceeds its state budget, it is not proven here.
+
+Memories are mapped to one register per word first. A change of a memory's initial contents is
+then a data-path register (a RAM word) that starts with its may-differ bit set, and stays
+unseen if it is written before it is read, or a data-independent register (a ROM word) whose
+instruction fields reach the data path only where the instruction uses them.
 
 The netlist is Yosys's JSON of the miter, evaluated word by word with the semantics of Yosys's
 internal cells; each step is compiled into one Python function (written here, not a simulator
