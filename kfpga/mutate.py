@@ -57,6 +57,7 @@ class Block:
     testcase: str | list | None = None
     formal: str | None = None  # the block's label in kfpga.formal.jobs(), whose harness holds it as top.dut
     data: dict | None = None  # {port: [bit, ...]}: the input bits that carry samples (kfpga/reach.py)
+    tied: dict | None = None  # {port: [bit, ...]}: input bits that the block's input contract holds at 0
 
     @property
     def target(self):
@@ -109,7 +110,8 @@ def blocks():
                    "kfpga_core", "", "test_core",
                    {"variant": variant, **signal, "channels": channels, "p_idle": 0.2, "p_ready": 0.7,
                     "config_toml": cfg.to_toml(), "check_ranges": cfg.check_ranges}, None, None,
-                   sample_bits(cfg.spec.make_core(cfg, variant, channels=channels)))
+                   sample_bits(cfg.spec.make_core(cfg, variant, channels=channels)),
+                   channel_bits_tied(cfg.spec.make_core(cfg, variant, channels=channels)))
              for cfg, variant, name, signal, channels in others]
     return [
         Block("clock divider", "divider", {"ratio": 10}, lambda: ClockDivider(ratio=10), "kfpga_divider", "",
@@ -123,7 +125,8 @@ def blocks():
         Block("full core", "core", {"variant": "full", "channels": 1}, lambda: FullKalman(narrow), "kfpga_core", "",
               "test_core", {"variant": "full", "samples": 150, "p_idle": 0.2, "p_ready": 0.7,
                             "config_toml": narrow.to_toml(), "check_ranges": False}, None,
-              None, sample_bits(FullKalman(narrow))),  # its properties' harness holds the default config
+              # its properties' harness holds the default config
+              None, sample_bits(FullKalman(narrow)), channel_bits_tied(FullKalman(narrow))),
         Block("top level", "top", {"variant": "steady", "channel": 1},
               lambda: FilterSystem(config, variant="steady", channel=1), TOP_NAME, "", "test_top",
               {"variant": "steady", "samples": 60, "channel": 1, "scenario": "stress"},
@@ -137,6 +140,38 @@ def sample_bits(core):
     but the channel number)."""
     layout = figures_only(core).i.payload.shape()
     return {"i__payload": [f.offset + k for name, f in layout if name != "channel" for k in range(f.width)]}
+
+
+def channel_bits_tied(core):
+    """``{"i__payload": bits}``: the channel field's bits of a one-channel core's input word
+    (``None`` for more channels). A core takes channel numbers below its channel count (its
+    input contract); with one channel the field is one bit, always 0 (hw/layouts.py)."""
+    core = figures_only(core)
+    if core.channels != 1:
+        return None
+    field = dict(core.i.payload.shape())["channel"]
+    return {"i__payload": list(range(field.offset, field.offset + field.width))}
+
+
+def _tie(block, il_path, module, prefix=""):
+    """Yosys commands that hold the inputs ``block.tied`` of ``module`` (in ``il_path``; its
+    port names are the block's with ``prefix``) at 0, the rest free: each such port becomes an
+    internal wire, driven bit by bit by 0 or by a new input ``free_<port>``."""
+    lines = []
+    for port, bits in (block.tied or {}).items():
+        name = prefix + port
+        width = _port_width(il_path, name)
+        lines += [f"add -input free_{port} {width} {module}", f"delete -input {module}/w:{name}", f"cd {module}"]
+        lines += [f"connect -nounset -set {name}[{k}] " + ("1'0" if k in bits else f"free_{port}[{k}]") for k in range(width)]
+        lines.append("cd ..")
+    return "\n".join(lines) + "\n" if lines else ""
+
+
+def _port_width(il_path, wire):
+    match = re.search(rf"^\s*wire width (\d+) input \d+\s+\\{re.escape(wire)}$", il_path.read_text(), re.M)
+    if match is None:
+        raise RuntimeError(f"no input {wire} in {il_path}")
+    return int(match.group(1))
 
 
 def _yosys(script, cwd):
@@ -259,6 +294,12 @@ def _equivalence(block, line, mdir, folder):
                      "hierarchy -top miter\nwrite_rtlil miter.il\n", mdir)
     if not ok:
         return {"result": "survived", "by": None, "detail": "no miter: " + log.strip()[-200:]}
+    if block.tied:  # the inputs the block's contract holds at 0 are 0 in the miter too
+        tie = _tie(block, mdir / "miter.il", "miter", "in_")
+        ok, log = _yosys(f"read_rtlil miter.il\n{tie}hierarchy -top miter\nwrite_rtlil miter.il\n", mdir)
+        if not ok:
+            return {"result": "survived", "by": None, "detail": "no miter: " + log.strip()[-200:]}
+    held = " (channel field at 0: a one-channel core's input contract)" if block.tied else ""
     if _touches_clock(line):
         # both checks below step every register on one clock: a mutant that inverts or moves a
         # clock changes when registers step, which they cannot see, so none may call it equivalent
@@ -268,12 +309,20 @@ def _equivalence(block, line, mdir, folder):
     # (logic that reaches no output is removed first: a changed bit of an unrouted field).
     # Memories become registers, one per word (memory_map). It assumes that matched registers
     # start equal, so it does not apply to a change of a memory's initial contents.
+    # Where the block's contract holds inputs at 0, a second try holds them at 0 in both designs
+    # and folds the constants first (a change that only shows with a channel number a one-channel
+    # core never takes is then no change).
     if not _changes_memory_contents(line, folder):
-        ok, _ = _yosys("read_rtlil gold.il\nread_rtlil gate.il\nmemory_collect\nmemory_map\nopt_clean -purge\n"
-                       "equiv_make gold gate equiv\nhierarchy -top equiv\nasync2sync\nequiv_simple -seq 5\n"
-                       "equiv_induct -seq 5\nequiv_status -assert\n", mdir)
-        if ok:
-            return {"result": "equivalent", "by": "Yosys equiv_induct (registers matched)"}
+        tries = [("", "")]
+        if block.tied:
+            tries.append((_tie(block, mdir / "gold.il", "gold") + _tie(block, mdir / "gate.il", "gate") + "opt\n",
+                          f"; {held.strip(' ()')}"))
+        for tie, told in tries:
+            ok, _ = _yosys(f"read_rtlil gold.il\nread_rtlil gate.il\n{tie}memory_collect\nmemory_map\nopt_clean -purge\n"
+                           "equiv_make gold gate equiv\nhierarchy -top equiv\nasync2sync\nequiv_simple -seq 5\n"
+                           "equiv_induct -seq 5\nequiv_status -assert\n", mdir)
+            if ok:
+                return {"result": "equivalent", "by": f"Yosys equiv_induct (registers matched{told})"}
     # a change in the logic that does not depend on the samples (a time-varying core's covariance
     # and gains): every reachable state of that logic, searched (kfpga/reach.py)
     verdict = _data_independent(block, line, mdir) if block.data else None
@@ -281,7 +330,7 @@ def _equivalence(block, line, mdir, folder):
         return {"result": "equivalent", "by": f"explicit-state search of the data-independent logic: {verdict.why}"}
     status = _sby(mdir, "miter.il", "prove", 20, top="miter")
     if status == "PASS":
-        return {"result": "equivalent", "by": "SymbiYosys: k-induction on a miter"}
+        return {"result": "equivalent", "by": f"SymbiYosys: k-induction on a miter{held}"}
     if status == "FAIL":
         return {"result": "survived", "by": None, "detail": "a difference exists (counterexample)"}
     # a small miter: every reachable state is reachable on a path that repeats no state, so a
@@ -291,7 +340,7 @@ def _equivalence(block, line, mdir, folder):
         depth = 2 ** bits + 1
         if _sby(mdir, "miter.il", "bmc", depth, top="miter") == "PASS":
             return {"result": "equivalent", "by": f"SymbiYosys: BMC of the miter to {depth} steps, complete for its "
-                                                  f"{bits} register bits"}
+                                                  f"{bits} register bits{held}"}
     return {"result": "survived", "by": None, "detail": "equivalence not proven"}
 
 

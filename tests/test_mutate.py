@@ -1,0 +1,75 @@
+"""The mutation run's input contract (kfpga/mutate.py): a one-channel core's channel field is
+held at 0 in the equivalence checks, and nothing else is."""
+
+from types import SimpleNamespace
+
+import pytest
+from amaranth import Elaboratable, Module, Signal
+from amaranth.back import rtlil
+
+from kfpga import mutate
+from kfpga.config import FilterConfig
+from kfpga.formal import warm, yosys
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _warm():
+    warm()
+
+
+@pytest.mark.parametrize("channels", [1, 2])
+def test_the_tied_bits_are_the_channel_field_of_a_one_channel_core(channels):
+    """With one channel the tied bits are the payload bits that carry no sample (the channel
+    field); with two channels, where the field carries both numbers, none is tied."""
+    cfg = FilterConfig()
+    core = cfg.spec.make_core(cfg, "steady", channels=channels)
+    tied = mutate.channel_bits_tied(core)
+    if channels == 2:
+        assert tied is None
+        return
+    width = core.i.payload.shape().size
+    samples = set(mutate.sample_bits(core)["i__payload"])
+    assert set(tied) == {"i__payload"}
+    assert tied["i__payload"], "a one-channel core has a channel field"
+    assert samples.isdisjoint(tied["i__payload"])
+    assert samples | set(tied["i__payload"]) == set(range(width)), "every payload bit is a sample bit or tied"
+
+
+class _Xor(Elaboratable):
+    """o = the XOR of the input bits in ``taps``: two of them differ only where a tap differs."""
+
+    def __init__(self, taps):
+        self.taps = taps
+        self.inp = Signal(4, name="inp")
+        self.o = Signal(name="o")
+
+    def elaborate(self, platform):
+        m = Module()
+        acc = 0
+        for k in self.taps:
+            acc = acc ^ self.inp[k]
+        m.d.sync += self.o.eq(acc)
+        return m
+
+
+def _equivalent(tmp_path, tied_bits):
+    """Yosys's equiv_induct on gold (inp[1] ^ inp[2]) and gate (the same ^ inp[0]), with the
+    bits ``tied_bits`` of ``inp`` held at 0 in both, as the mutation run holds them."""
+    for name, taps in (("gold", [1, 2]), ("gate", [0, 1, 2])):
+        design = _Xor(taps)
+        (tmp_path / f"{name}.il").write_text(rtlil.convert(design, name=name, ports=[design.inp, design.o]))
+    block = SimpleNamespace(tied={"inp": tied_bits} if tied_bits is not None else None)
+    tie = mutate._tie(block, tmp_path / "gold.il", "gold") + mutate._tie(block, tmp_path / "gate.il", "gate")
+    ok, log = yosys(f"read_rtlil gold.il\nread_rtlil gate.il\nproc\n{tie}opt\nopt_clean -purge\n"
+                    "equiv_make gold gate equiv\nhierarchy -top equiv\nasync2sync\nequiv_simple -seq 5\n"
+                    "equiv_induct -seq 5\nequiv_status -assert\n", tmp_path)
+    # a failure must be the proof's, not the script's
+    assert ok or "unproven $equiv cells" in log, log
+    return ok
+
+
+@pytest.mark.parametrize(("tied_bits", "expected"), [(None, False), ([3], False), ([0], True), ([0, 3], True)])
+def test_a_change_that_only_a_tied_bit_shows_is_equivalent_and_no_other(tmp_path, tied_bits, expected):
+    """The extra tap on bit 0 is invisible exactly when bit 0 is held at 0; holding another bit
+    proves nothing."""
+    assert _equivalent(tmp_path, tied_bits) is expected
