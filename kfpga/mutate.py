@@ -9,11 +9,15 @@ another wire). Each mutant is then run against two killers in turn:
 2. if it survives those, the block's formal properties (``hw/properties.py``) on the same
    mutation of the property harness's copy of the block (SymbiYosys).
 
-A mutant both miss is checked for equivalence with the original block: a miter of the two,
-proven equal by k-induction with SymbiYosys, by Yosys's ``equiv_induct`` with the registers
-matched by name, or, for a miter of at most 11 register bits, by a bounded check from
-power-up as deep as it has states (complete: every reachable state lies on a path that
-repeats none), makes it *equivalent* (no test could see it); otherwise it *survived*.
+A mutant both miss is checked for equivalence with the original block (memories mapped to
+registers, one per word): Yosys's ``equiv_induct`` with the registers matched by name, as
+written, with constants folded, and, for a one-channel core, with the channel field held at 0
+(its input contract: it takes channel numbers below its channel count); then, for a change in
+the logic that does not depend on the samples, an explicit-state search of that logic
+(``kfpga/reach.py``); then a miter of the two, proven equal by k-induction with SymbiYosys or,
+for a miter of at most 11 register bits, by a bounded check from power-up as deep as it has
+states (complete: every reachable state lies on a path that repeats none). A proof makes it
+*equivalent* (no test could see it); otherwise it *survived*.
 The score is killed / (mutants - equivalent), per block.
 
     python -m kfpga.mutate [--mutants N] [--seed S] [--only BLOCK] [--json]
@@ -309,14 +313,16 @@ def _equivalence(block, line, mdir, folder):
     # (logic that reaches no output is removed first: a changed bit of an unrouted field).
     # Memories become registers, one per word (memory_map). It assumes that matched registers
     # start equal, so it does not apply to a change of a memory's initial contents.
-    # Where the block's contract holds inputs at 0, a second try holds them at 0 in both designs
-    # and folds the constants first (a change that only shows with a channel number a one-channel
-    # core never takes is then no change).
+    # A second try folds the constants of each design first (Yosys's opt: a register that holds
+    # a constant becomes that constant, so a change that only meets it goes nowhere); where the
+    # block's contract holds inputs at 0, a third holds them at 0 in both designs before folding
+    # (a change that only shows with a channel number a one-channel core never takes is then no
+    # change).
     if not _changes_memory_contents(line, folder):
-        tries = [("", "")]
+        tries = [("", ""), ("opt\n", "; constants folded")]
         if block.tied:
             tries.append((_tie(block, mdir / "gold.il", "gold") + _tie(block, mdir / "gate.il", "gate") + "opt\n",
-                          f"; {held.strip(' ()')}"))
+                          f"; constants folded, {held.strip(' ()')}"))
         for tie, told in tries:
             ok, _ = _yosys(f"read_rtlil gold.il\nread_rtlil gate.il\n{tie}memory_collect\nmemory_map\nopt_clean -purge\n"
                            "equiv_make gold gate equiv\nhierarchy -top equiv\nasync2sync\nequiv_simple -seq 5\n"
