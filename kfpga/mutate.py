@@ -12,7 +12,8 @@ another wire). Each mutant is then run against two killers in turn:
 A mutant both miss is checked for equivalence with the original block (memories mapped to
 registers, one per word): Yosys's ``equiv_induct`` with the registers matched by name, as
 written, with constants folded, and, for a one-channel core, with the channel field held at 0
-(its input contract: it takes channel numbers below its channel count); then, for a change in
+(its input contract: it takes channel numbers below its channel count), each with unused
+names purged and with every name kept; then, for a change in
 the logic that does not depend on the samples, an explicit-state search of that logic
 (``kfpga/reach.py``); then a miter of the two, proven equal by k-induction with SymbiYosys or,
 for a miter of at most 11 register bits, by a bounded check from power-up as deep as it has
@@ -239,9 +240,7 @@ def run_block(block, count, seed, progress):
     if not ok:
         raise RuntimeError(f"mutate -list failed for {block.name}:\n{log}")
     lines = [ln for ln in (folder / "mutations.ys").read_text().splitlines() if ln.startswith("mutate ")]
-    # the original, through the same flow, for the equivalence checks
-    _yosys(f"read_rtlil design.il\nhierarchy -top {block.target}\nproc -norom\nflatten\nrename {block.target} gold\n"
-           "write_rtlil gold.il\n", folder)
+    _extract(block, "", folder, "gold")  # the original, through the same flow, for the equivalence checks
     # the unmutated design through the same flow must pass its bench, or no kill would mean anything
     base = folder / "original"
     base.mkdir()
@@ -288,10 +287,16 @@ def _formal_kills(block, line, mdir, checks):
     return None
 
 
-def _equivalence(block, line, mdir, folder):
+def _extract(block, line, folder, name):
+    """``folder/<name>.il``: the block's module of ``folder/design.il`` with the ``mutate`` line
+    ``line`` applied ("" for none), processes lowered, flattened, renamed ``name``; whether it worked."""
     ok, _ = _yosys(f"read_rtlil design.il\n{line}\nhierarchy -top {block.target}\nproc -norom\nflatten\n"
-                   f"rename {block.target} gate\nwrite_rtlil gate.il\n", mdir)
-    if not ok:
+                   f"rename {block.target} {name}\nwrite_rtlil {name}.il\n", folder)
+    return ok
+
+
+def _equivalence(block, line, mdir, folder):
+    if not _extract(block, line, mdir, "gate"):
         return {"result": "survived", "by": None, "detail": "the mutant block could not be extracted"}
     shutil.copy(folder / "gold.il", mdir / "gold.il")
     ok, log = _yosys("read_rtlil gold.il\nread_rtlil gate.il\nmiter -equiv -flatten -make_assert -ignore_gold_x gold gate miter\n"
@@ -308,27 +313,8 @@ def _equivalence(block, line, mdir, folder):
         # both checks below step every register on one clock: a mutant that inverts or moves a
         # clock changes when registers step, which they cannot see, so none may call it equivalent
         return {"result": "survived", "by": None, "detail": "a clock mutant: the equivalence checks model one clock"}
-    # first the fast check: the two designs' registers matched by name (Yosys's equiv_induct)
-    # proves the mutants that change no reachable state, and those whose change goes nowhere
-    # (logic that reaches no output is removed first: a changed bit of an unrouted field).
-    # Memories become registers, one per word (memory_map). It assumes that matched registers
-    # start equal, so it does not apply to a change of a memory's initial contents.
-    # A second try folds the constants of each design first (Yosys's opt: a register that holds
-    # a constant becomes that constant, so a change that only meets it goes nowhere); where the
-    # block's contract holds inputs at 0, a third holds them at 0 in both designs before folding
-    # (a change that only shows with a channel number a one-channel core never takes is then no
-    # change).
-    if not _changes_memory_contents(line, folder):
-        tries = [("", ""), ("opt\n", "; constants folded")]
-        if block.tied:
-            tries.append((_tie(block, mdir / "gold.il", "gold") + _tie(block, mdir / "gate.il", "gate") + "opt\n",
-                          f"; constants folded, {held.strip(' ()')}"))
-        for tie, told in tries:
-            ok, _ = _yosys(f"read_rtlil gold.il\nread_rtlil gate.il\n{tie}memory_collect\nmemory_map\nopt_clean -purge\n"
-                           "equiv_make gold gate equiv\nhierarchy -top equiv\nasync2sync\nequiv_simple -seq 5\n"
-                           "equiv_induct -seq 5\nequiv_status -assert\n", mdir)
-            if ok:
-                return {"result": "equivalent", "by": f"Yosys equiv_induct (registers matched{told})"}
+    if not _changes_memory_contents(line, folder) and (told := _matched_equivalence(block, mdir)) is not None:
+        return {"result": "equivalent", "by": f"Yosys equiv_induct (registers matched{told})"}
     # a change in the logic that does not depend on the samples (a time-varying core's covariance
     # and gains): every reachable state of that logic, searched (kfpga/reach.py)
     verdict = _data_independent(block, line, mdir) if block.data else None
@@ -348,6 +334,38 @@ def _equivalence(block, line, mdir, folder):
             return {"result": "equivalent", "by": f"SymbiYosys: BMC of the miter to {depth} steps, complete for its "
                                                   f"{bits} register bits{held}"}
     return {"result": "survived", "by": None, "detail": "equivalence not proven"}
+
+
+def _matched_equivalence(block, mdir):
+    """The fast check of ``mdir/gold.il`` against ``mdir/gate.il``: the two designs' registers
+    matched by name (Yosys's ``equiv_induct``); ``None`` if it fails, else what the proof
+    assumed ("" for nothing, else "; ..."). Memories become registers, one per word
+    (``memory_map``). It assumes that matched registers start equal, so it does not apply to a
+    change of a memory's initial contents.
+
+    It proves the mutants that change no reachable state, and those whose change goes nowhere.
+    Tries, in turn: the designs as written; each design's constants folded first (Yosys's
+    ``opt``: a register that holds a constant becomes that constant, so a change that only meets
+    it goes nowhere); and, where the block's contract holds inputs at 0, those inputs held at 0
+    in both designs before folding (a change that only shows with a channel number a
+    one-channel core never takes is then no change). Each try runs twice: with the unused
+    wires' names purged (logic that reaches no output goes: a changed bit of an unrouted field),
+    then with every name kept (a mutation at a register's output can leave that register under
+    another of its names in one design only, and ``equiv_make``, which matches by name, then
+    finds no partner for it)."""
+    tries = [("", ""), ("opt\n", "; constants folded")]
+    if block.tied:
+        held = "channel field at 0: a one-channel core's input contract"
+        tries.append((_tie(block, mdir / "gold.il", "gold") + _tie(block, mdir / "gate.il", "gate") + "opt\n",
+                      f"; constants folded, {held}"))
+    for tie, told in tries:
+        for clean in ("opt_clean -purge", "opt_clean"):
+            ok, _ = _yosys(f"read_rtlil gold.il\nread_rtlil gate.il\n{tie}memory_collect\nmemory_map\n{clean}\n"
+                           "equiv_make gold gate equiv\nhierarchy -top equiv\nasync2sync\nequiv_simple -seq 5\n"
+                           "equiv_induct -seq 5\nequiv_status -assert\n", mdir)
+            if ok:
+                return told
+    return None
 
 
 def _changes_memory_contents(line, folder):

@@ -1,6 +1,7 @@
 """The mutation run's input contract (kfpga/mutate.py): a one-channel core's channel field is
 held at 0 in the equivalence checks, and nothing else is."""
 
+import re
 from types import SimpleNamespace
 
 import pytest
@@ -73,3 +74,29 @@ def test_a_change_that_only_a_tied_bit_shows_is_equivalent_and_no_other(tmp_path
     """The extra tap on bit 0 is invisible exactly when bit 0 is held at 0; holding another bit
     proves nothing."""
     assert _equivalent(tmp_path, tied_bits) is expected
+
+
+def _register_cell(il_text, wire):
+    """The name of the ``$dff`` cell whose Q is ``wire`` in Amaranth's RTLIL."""
+    match = re.search(rf"^\s*cell \$dff (\S+)\n(?:\s*(?:parameter|connect) .*\n)*?\s*connect \\Q \\{wire}\n", il_text, re.M)
+    assert match is not None, f"no register {wire}"
+    return match.group(1)
+
+
+def test_a_change_only_a_channel_number_shows_is_equivalent_in_a_one_channel_core(tmp_path):
+    """The steady core's input register, bit 15 inverted when its bit 0 is set: bit 0 is the
+    channel field, always 0 in a one-channel core, so equiv_induct proves it equivalent with the
+    field held at 0 (the mutation run's survivor #11 before the names-kept try); the same
+    change controlled by bit 1, a sample bit, is no such change."""
+    block = next(b for b in mutate.blocks() if b.name == "steady core")
+    assert block.tied == {"i__payload": [0]}
+    (tmp_path / "design.il").write_text(rtlil.convert(block.make(), name=block.toplevel))
+    cell = _register_cell((tmp_path / "design.il").read_text(), "s0")
+    assert mutate._extract(block, "", tmp_path, "gold")
+    proven = {}
+    for ctrl in (0, 1):
+        line = f"mutate -mode cnot1 -module {block.target} -cell {cell} -port Q -portbit 15 -ctrlbit {ctrl}"
+        assert mutate._extract(block, line, tmp_path, "gate")
+        proven[ctrl] = mutate._matched_equivalence(block, tmp_path)
+    assert proven[0] == "; constants folded, channel field at 0: a one-channel core's input contract"
+    assert proven[1] is None
