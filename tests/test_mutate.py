@@ -54,19 +54,16 @@ class _Xor(Elaboratable):
 
 
 def _equivalent(tmp_path, tied_bits):
-    """Yosys's equiv_induct on gold (inp[1] ^ inp[2]) and gate (the same ^ inp[0]), with the
-    bits ``tied_bits`` of ``inp`` held at 0 in both, as the mutation run holds them."""
+    """The mutation run's equiv_induct check of gold (inp[1] ^ inp[2]) against gate (the same
+    ^ inp[0]), with the bits ``tied_bits`` of ``inp`` held at 0 in both, as the run holds a
+    one-channel core's channel field."""
     for name, taps in (("gold", [1, 2]), ("gate", [0, 1, 2])):
         design = _Xor(taps)
-        (tmp_path / f"{name}.il").write_text(rtlil.convert(design, name=name, ports=[design.inp, design.o]))
+        (tmp_path / "design.il").write_text(rtlil.convert(design, name=name, ports=[design.inp, design.o]))
+        ok, log = yosys(f"read_rtlil design.il\nproc\nwrite_rtlil {name}.il\n", tmp_path)
+        assert ok, log
     block = SimpleNamespace(tied={"inp": tied_bits} if tied_bits is not None else None)
-    tie = mutate._tie(block, tmp_path / "gold.il", "gold") + mutate._tie(block, tmp_path / "gate.il", "gate")
-    ok, log = yosys(f"read_rtlil gold.il\nread_rtlil gate.il\nproc\n{tie}opt\nopt_clean -purge\n"
-                    "equiv_make gold gate equiv\nhierarchy -top equiv\nasync2sync\nequiv_simple -seq 5\n"
-                    "equiv_induct -seq 5\nequiv_status -assert\n", tmp_path)
-    # a failure must be the proof's, not the script's
-    assert ok or "unproven $equiv cells" in log, log
-    return ok
+    return mutate._matched_equivalence(block, tmp_path) is not None
 
 
 @pytest.mark.parametrize(("tied_bits", "expected"), [(None, False), ([3], False), ([0], True), ([0, 3], True)])
