@@ -16,6 +16,7 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 test: $(STAMP)
+	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -n auto --dist loadgroup
 
 demo: $(STAMP)
@@ -37,13 +38,13 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_model.py
 	$(BIN)/python bench/bench_cosim.py
 
-# the formal properties of hw/properties.py, proven with SymbiYosys; prints the table (about 15 min on 2 cores)
+# the formal properties of kfpga/verify/properties.py, proven with SymbiYosys; prints the table (about 15 min on 2 cores)
 formal: $(STAMP)
-	$(BIN)/python -m kfpga.formal
+	$(BIN)/python -m kfpga.verify.formal
 
 # mutation testing of every block: Yosys mutants, killed by the benches or the properties (see README)
 mutate: $(STAMP)
-	$(BIN)/python -m kfpga.mutate
+	$(BIN)/python -m kfpga.verify.mutate
 
 # long regressions: 10^6 whole-design estimates per variant on Verilator, in one-channel and in
 # six-channel mode, and 10^5 per variant on Icarus, each with its own seed (printed); 0 mismatches

@@ -21,11 +21,11 @@ import json
 import platform
 import time
 
-from kfpga.config import FilterConfig
+from kfpga.core.config import FilterConfig
+from kfpga.core.tools import simulator_available
 from kfpga.sim import corerun, system
 from kfpga.sim.runner import SIMULATORS, build, run
 from kfpga.sim.sources import stress_codes
-from kfpga.tools import simulator_available
 
 SEED = 20080525
 

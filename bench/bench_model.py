@@ -21,11 +21,11 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 from fxpmath import Fxp
 
-from kfpga.ads8364 import CODE_FORMAT as INPUT_FORMAT
-from kfpga.config import FilterConfig
-from kfpga.fixedmodel import FixedModel
+from kfpga.core.ads8364 import CODE_FORMAT as INPUT_FORMAT
+from kfpga.core.config import FilterConfig
+from kfpga.core.fixedmodel import FixedModel
 from kfpga.model.kalman2 import steady_gain
-from kfpga.scenarios import sine
+from kfpga.model.scenarios import sine
 
 SEED = 20080525
 

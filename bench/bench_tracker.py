@@ -18,7 +18,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from kfpga.config import FilterConfig
+from kfpga.core.config import FilterConfig
 from kfpga.hw.alphabeta import TrackerCore
 from kfpga.hw.generate import to_verilog
 from kfpga.hw.resources import EP2C20, estimate

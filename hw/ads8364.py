@@ -38,7 +38,7 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
-from kfpga.ads8364 import hold_pair
+from kfpga.core.ads8364 import hold_pair
 
 __all__ = ["ControlWord", "SampleLayout", "ADS8364Controller", "control_table",
            "N_STATES", "CONV0", "CONV19", "READ0", "READ1"]
@@ -170,7 +170,7 @@ class ADS8364Controller(wiring.Component):
             "o": Out(stream.Signature(SampleLayout)),
             "timeout": Out(1),
         })
-        # visible to tests, waveforms and the formal properties (hw/properties.py)
+        # visible to tests, waveforms and the formal properties (kfpga/verify/properties.py)
         self.state = Signal(range(32), name="state")
         self.restart = Signal(range(3), init=2, name="restart")  # 2: RESET low next in CONV0, 1: one idle period, 0: run
         self.read_index = Signal(range(6), name="read_index")

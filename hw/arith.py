@@ -1,11 +1,11 @@
 """The Amaranth backend of the operations layer: a filter's stage functions built as RTL.
 
-:class:`AmaranthOps` runs the same stage functions as the model (``kfpga/ops.py``) and builds
+:class:`AmaranthOps` runs the same stage functions as the model (``kfpga/core/ops.py``) and builds
 their combinational logic in a module. The alignment and multiplier rules come from
-:class:`~kfpga.ops.Ops`; this module supplies Amaranth's operators and :func:`requantize`, the
+:class:`~kfpga.core.ops.Ops`; this module supplies Amaranth's operators and :func:`requantize`, the
 one place where bits are dropped. Amaranth widens ``+``, ``-`` and ``*`` to hold every result,
 so nothing wraps before the explicit quantisation, which saturates (or wraps) and raises a
-flag exactly as :func:`kfpga.fixed.requantize` does.
+flag exactly as :func:`kfpga.core.fixed.requantize` does.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from functools import reduce
 
 from amaranth import Cat, Const, Mux, Signal, signed
 
-from kfpga.fixed import Overflow, Rounding
-from kfpga.ops import Ops
+from kfpga.core.fixed import Overflow, Rounding
+from kfpga.core.ops import Ops
 
 __all__ = ["AmaranthOps", "any_flag", "live_flags", "requantize"]
 
@@ -36,7 +36,7 @@ def any_flag(flags):
 
 
 def _round_addend(value, shift, rounding):
-    """:func:`kfpga.fixed.round_addend` in bits: an unsigned ``shift``-bit addend (``None``: 0).
+    """:func:`kfpga.core.fixed.round_addend` in bits: an unsigned ``shift``-bit addend (``None``: 0).
 
     ``h = 2**(shift-1)`` is ``1`` then ``shift-1`` zeros; ``h - 1`` is ``0`` then ones; so ``round``'s
     ``h - sign`` is ``~sign`` then copies of ``sign``, ``convergent``'s ``h - 1 + b`` is ``b`` then
@@ -165,7 +165,7 @@ class AmaranthOps(Ops):
         return flag
 
     def hold(self, value, name):
-        """A register holding ``value`` (an :class:`~kfpga.ops.Fx`): ``(Fx of the register, its .eq)``.
+        """A register holding ``value`` (an :class:`~kfpga.core.ops.Fx`): ``(Fx of the register, its .eq)``.
 
         The core decides when the assignment happens (which FSM state, which enable).
         """

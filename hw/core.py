@@ -18,11 +18,11 @@ from amaranth import Cat, Const, Module, Mux, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from kfpga.ads8364 import CODE_FORMAT
+from kfpga.core.ads8364 import CODE_FORMAT
+from kfpga.core.ops import Fx
 from kfpga.hw.arith import NO_OVERFLOW, AmaranthOps, any_flag, live_flags
 from kfpga.hw.layouts import channel_bits, input_layout, output_layout
 from kfpga.hw.storage import MAX_REGISTER_CHANNELS, StateMemory, at, check_channels, select, state_array
-from kfpga.ops import Fx
 
 __all__ = ["Core", "LoopPipeline", "write_estimate", "register_stage"]
 
@@ -45,7 +45,7 @@ def write_estimate(m, core, channel, outputs, flags):
 
 def register_stage(m, advance, tag, valid, channel, flags, live):
     """A pipeline register stage, loaded when ``advance``: every live value (an
-    :class:`~kfpga.ops.Fx` keeps its binary point; a condition stays one bit), the valid bit, the
+    :class:`~kfpga.core.ops.Fx` keeps its binary point; a condition stays one bit), the valid bit, the
     channel and the flags so far (no register when they are the constant 0). Returns
     ``(valid, channel, flags, live)`` of the registers."""
     r_valid = Signal(name=f"r{tag}_valid")
@@ -94,9 +94,9 @@ class Core(wiring.Component):
     @cached_property
     def overflow_sites(self):
         """The writes that can overflow: the model's interval analysis from the formats of the
-        state and the samples (``kfpga/compiled.py``). Every value a write gets is the model's, so
+        state and the samples (``kfpga/core/compiled.py``). Every value a write gets is the model's, so
         the others never saturate, and their logic is left out."""
-        from kfpga.fixedmodel import FixedModel
+        from kfpga.core.fixedmodel import FixedModel
 
         return frozenset(FixedModel(self.config, variant=self.variant).kernel(False).sites)
 

@@ -48,7 +48,7 @@ class Divider(wiring.Component):
             "i": In(stream.Signature(self.request_layout)),
             "o": Out(stream.Signature(self.result_layout)),
         })
-        # the registers, visible to tests and to the formal properties (hw/properties.py)
+        # the registers, visible to tests and to the formal properties (kfpga/verify/properties.py)
         n = quotient_bits
         self.divisor = Signal(divisor_bits, name="divisor")
         self.remainder = Signal(divisor_bits, name="remainder")  # always < divisor while dividing

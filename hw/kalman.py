@@ -14,13 +14,13 @@ from typing import ClassVar
 
 from amaranth import Cat, Const, Module, Mux, Signal, signed
 
-from kfpga.ads8364 import CODE_FORMAT
+from kfpga.core.ads8364 import CODE_FORMAT
+from kfpga.core.ops import Fx, divider_shift, quotient_bits
 from kfpga.hw.arith import live_flags
 from kfpga.hw.core import Core, LoopPipeline, write_estimate
 from kfpga.hw.divider import Divider
 from kfpga.hw.storage import at, select
 from kfpga.model import kalman as eq
-from kfpga.ops import Fx, divider_shift, quotient_bits
 
 __all__ = ["SteadyCore", "FullCore", "make_core", "default_stages"]
 

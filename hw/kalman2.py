@@ -19,13 +19,13 @@ from typing import ClassVar
 
 from amaranth import Cat, Module, Mux, Signal, signed
 
-from kfpga.ads8364 import CODE_FORMAT
+from kfpga.core.ads8364 import CODE_FORMAT
+from kfpga.core.ops import Fx, divider_shift, quotient_bits
 from kfpga.hw.arith import NO_OVERFLOW, any_flag, live_flags
 from kfpga.hw.core import Core, LoopPipeline, write_estimate
 from kfpga.hw.divider import Divider
 from kfpga.hw.storage import at, select
 from kfpga.model import kalman2 as eq
-from kfpga.ops import Fx, divider_shift, quotient_bits
 
 __all__ = ["SteadyKalman", "FullKalman", "make_core", "STEADY_STEPS", "CUTS", "steady_predict", "steady_innovation",
            "steady_products", "steady_correct"]
@@ -78,7 +78,7 @@ class SteadyKalman(LoopPipeline):
     Parameters
     ----------
     config:
-        The shared :class:`~kfpga.config.FilterConfig` (the ``kalman2`` filter).
+        The shared :class:`~kfpga.core.config.FilterConfig` (the ``kalman2`` filter).
     channels:
         Independent channel states (1..8).
     stages:

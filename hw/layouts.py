@@ -5,7 +5,7 @@ from __future__ import annotations
 from amaranth import signed, unsigned
 from amaranth.lib import data
 
-from kfpga.ads8364 import CODE_FORMAT
+from kfpga.core.ads8364 import CODE_FORMAT
 
 __all__ = ["channel_bits", "input_layout", "output_layout"]
 

@@ -32,8 +32,8 @@ import tempfile
 from collections import defaultdict
 from pathlib import Path
 
+from kfpga.core.tools import nextpnr_ecp5_command, yosys_command
 from kfpga.hw.timing import analyse
-from kfpga.tools import nextpnr_ecp5_command, yosys_command
 
 __all__ = ["EP2C20", "estimate", "longest_path"]
 

@@ -1,4 +1,4 @@
-"""The sequential core: any variant's update run one operation at a time (``kfpga/program.py``).
+"""The sequential core: any variant's update run one operation at a time (``kfpga/core/program.py``).
 
 A slow filter (a ship's roll predicted every second, a speed log) needs few logic cells, not a
 datapath that updates in one clock. :class:`SequentialCore` executes the update's program: one
@@ -28,13 +28,13 @@ from functools import reduce
 from amaranth import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib.memory import Memory
 
-from kfpga.fixed import Rounding
+from kfpga.core.fixed import Rounding
+from kfpga.core.ops import Fx
+from kfpga.core.program import OPS, ROUNDINGS, build_program, handshake_twin
 from kfpga.hw.core import Core, write_estimate
 from kfpga.hw.divider import Divider
 from kfpga.hw.sqrt import SquareRoot
 from kfpga.hw.storage import m4k_blocks, select
-from kfpga.ops import Fx
-from kfpga.program import OPS, ROUNDINGS, build_program, handshake_twin
 
 __all__ = ["SequentialCore", "encode"]
 
@@ -78,7 +78,7 @@ class SequentialCore(Core):
     Parameters
     ----------
     config:
-        The shared :class:`~kfpga.config.FilterConfig`.
+        The shared :class:`~kfpga.core.config.FilterConfig`.
     variant:
         The variant whose update the core runs.
     channels:
@@ -100,7 +100,7 @@ class SequentialCore(Core):
                                                 channel_bits=len(self.i.payload.channel))
 
     def formal_twin(self):
-        """The core on a short, narrow copy of its program (:func:`kfpga.program.handshake_twin`):
+        """The core on a short, narrow copy of its program (:func:`kfpga.core.program.handshake_twin`):
         the same handshake, whole updates within a bounded check's reach."""
         from kfpga.hw.generate import figures_only
 

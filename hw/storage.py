@@ -8,7 +8,7 @@ import math
 from amaranth import Array, Cat, Const, Elaboratable, Module, Mux, Signal, unsigned
 from amaranth.lib.memory import Memory
 
-from kfpga.ops import Fx
+from kfpga.core.ops import Fx
 
 __all__ = ["state_array", "select", "at", "check_channels", "MAX_REGISTER_CHANNELS", "StateMemory", "m4k_blocks",
            "M4K_WIDTHS"]

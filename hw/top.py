@@ -117,7 +117,7 @@ PREFILTERS = ("53h",)
 def prefilter_core(config, channels):
     """The core of a pre-filter config (a 53H smoother) for ``channels`` ADC channels, checked:
     its formats must not be able to overflow (its words reach the core unflagged)."""
-    from kfpga.fixedmodel import FixedModel
+    from kfpga.core.fixedmodel import FixedModel
 
     if config.filter not in PREFILTERS:
         raise ValueError(f"the pre-filter must be one of {', '.join(PREFILTERS)}, not {config.filter}")
@@ -148,7 +148,7 @@ class FilterSystem(wiring.Component):
     Parameters
     ----------
     config:
-        Shared :class:`~kfpga.config.FilterConfig`: the filter and its formats.
+        Shared :class:`~kfpga.core.config.FilterConfig`: the filter and its formats.
     variant:
         Which of the filter's cores (default: its first variant).
     six_channel:
@@ -165,7 +165,7 @@ class FilterSystem(wiring.Component):
     out_field:
         The output field on ``out_data`` (default: the filter's, ``x1`` for the paper's).
     prefilter:
-        ``None``, or the :class:`~kfpga.config.FilterConfig` of a 53H smoother
+        ``None``, or the :class:`~kfpga.core.config.FilterConfig` of a 53H smoother
         (``model/tukey53h.py``) between the controller and the core: every ADC channel read has
         its own window, the core gets each sample 4 samples late, with its outliers (ADC
         glitches) replaced. Its formats must be ones that cannot overflow (the defaults).

@@ -25,12 +25,12 @@ from __future__ import annotations
 
 from amaranth import Const, Module, Signal
 
-from kfpga.ads8364 import CODE_FORMAT
+from kfpga.core.ads8364 import CODE_FORMAT
+from kfpga.core.ops import Fx
 from kfpga.hw.arith import any_flag
 from kfpga.hw.core import Core, register_stage, write_estimate
 from kfpga.hw.storage import at, check_channels
 from kfpga.model import tukey53h as eq
-from kfpga.ops import Fx
 
 __all__ = ["Tukey53HCore", "make_core"]
 

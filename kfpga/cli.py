@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from kfpga import __version__
-from kfpga.errors import UsageError
+from kfpga.core.errors import UsageError
 
 EXIT_USAGE = 2
 
@@ -62,8 +62,8 @@ def _budget(text):
 def _load_config(args, *, hardware=False):
     """The config of ``--config`` and ``--filter`` (which must agree), with ``--variant`` checked
     (``hardware``: and refused when it has no core for this model)."""
-    from kfpga import registry
-    from kfpga.config import FilterConfig
+    from kfpga.core import registry
+    from kfpga.core.config import FilterConfig
 
     name = getattr(args, "filter", None)
     preset = getattr(args, "preset", None)
@@ -95,7 +95,7 @@ def _load_config(args, *, hardware=False):
 
 def _warn_precision(config):
     """Warnings about output steps coarse against the float filter's noise, on stderr."""
-    from kfpga.analysis import precision_warnings
+    from kfpga.flows.analysis import precision_warnings
 
     for line in precision_warnings(config):
         print(f"warning: {line}", file=sys.stderr)
@@ -125,7 +125,7 @@ PLOT_EXTENSIONS = (".png", ".svg", ".pdf")
 
 def _check_plot(path, option="--plot"):
     """``--plot FILE``: an image file matplotlib writes, in a folder that exists."""
-    from kfpga.paths import check_output_file
+    from kfpga.core.paths import check_output_file
 
     return None if path is None else str(check_output_file(path, option=option, extensions=PLOT_EXTENSIONS))
 
@@ -158,8 +158,8 @@ def _samples_for(args, config, *, command, need_truth=False):
     Everything is checked before anything is printed (the seed, notes about the file), so a
     bad invocation ends in one line: the error.
     """
-    from kfpga import scenarios
-    from kfpga.csvio import read_samples
+    from kfpga.flows.csvio import read_samples
+    from kfpga.model import scenarios
 
     notes = []
     if args.input:
@@ -199,20 +199,20 @@ def _samples_for(args, config, *, command, need_truth=False):
 
 
 def _filter_help():
-    from kfpga import registry
+    from kfpga.core import registry
 
     return f"the filter: {', '.join(registry.names())} (default: {registry.DEFAULT}; see 'kfpga filters')"
 
 
 def _variant_help():
-    from kfpga import registry
+    from kfpga.core import registry
 
     parts = [f"{s.name}: {', '.join(s.variants)}" for s in registry.specs()]
     return f"the filter's variant ({'; '.join(parts)}; default: the first)"
 
 
 def _out_field_help():
-    from kfpga import registry
+    from kfpga.core import registry
 
     parts = [f"{s.name}: {', '.join(o.name for o in s.outputs_for(s.params()))}, default {s.default_output}"
              for s in registry.specs()]
@@ -220,7 +220,7 @@ def _out_field_help():
 
 
 def _preset_help():
-    from kfpga import registry
+    from kfpga.core import registry
 
     names = ", ".join(f"{n} ({f})" for n, (f, _) in registry.presets().items())
     return f"a named model instead of --config: {names}; 'kfpga filters' describes them"
@@ -272,7 +272,7 @@ def _prefilter(args):
         if getattr(args, "threshold", None) is not None:
             raise UsageError("--threshold applies with --prefilter 53h only")
         return None
-    from kfpga.config import FilterConfig
+    from kfpga.core.config import FilterConfig
     from kfpga.model.tukey53h import Tukey53HParams
 
     try:
@@ -283,7 +283,7 @@ def _prefilter(args):
 
 
 def _run_compare(args):
-    from kfpga.analysis import compare, plot_compare, sample_count
+    from kfpga.flows.analysis import compare, plot_compare, sample_count
 
     _check_signal_args(args)
     args.plot = _check_plot(args.plot)
@@ -337,9 +337,9 @@ GLITCH_DENSITY = 0.005
 
 def _compare_prefilter(args, config, prefilter, truth, y, label):
     """``compare --prefilter 53h``: the filter with and without the pre-filter on a glitchy signal."""
-    from kfpga.ads8364 import CODE_MAX, CODE_MIN
-    from kfpga.analysis import compare, sample_count
-    from kfpga.fixedmodel import FixedModel
+    from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+    from kfpga.core.fixedmodel import FixedModel
+    from kfpga.flows.analysis import compare, sample_count
     from kfpga.model.tukey53h import DELAY
 
     y = np.array(y, dtype=np.int64)
@@ -395,7 +395,7 @@ def _require_word_lengths(config, command):
 def _run_sweep(args):
     from tqdm import tqdm
 
-    from kfpga.analysis import plot_sweep, sample_count, sweep
+    from kfpga.flows.analysis import plot_sweep, sample_count, sweep
 
     _check_signal_args(args)
     args.plot = _check_plot(args.plot)
@@ -447,10 +447,10 @@ def _run_sweep(args):
 
 
 def _run_propose(args):
-    from kfpga.analysis import sample_count
-    from kfpga.config import analysed_ranges
-    from kfpga.paths import check_output_file
-    from kfpga.propose import proposal_toml, propose
+    from kfpga.core.config import analysed_ranges
+    from kfpga.core.paths import check_output_file
+    from kfpga.flows.analysis import sample_count
+    from kfpga.flows.propose import proposal_toml, propose
 
     _check_signal_args(args)
     inputs = [args.config] if args.config else []
@@ -516,10 +516,10 @@ def _run_propose(args):
 
 
 def _run_filter(args):
-    from kfpga.analysis import float_run
-    from kfpga.csvio import read_samples, write_columns
-    from kfpga.fixedmodel import FixedModel
-    from kfpga.paths import check_output_file
+    from kfpga.core.fixedmodel import FixedModel
+    from kfpga.core.paths import check_output_file
+    from kfpga.flows.analysis import float_run
+    from kfpga.flows.csvio import read_samples, write_columns
 
     check_output_file(args.output, option="--output", inputs=(args.input, args.config), extensions=(".csv", ".txt"))
     config = _load_config(args)
@@ -550,8 +550,8 @@ def _run_filter(args):
 
 def _offline_53h(args, config, y):
     """``kfpga filter --offline``: the offline 53H of the whole file (every row decided)."""
-    from kfpga.errors import InputError
-    from kfpga.fixedmodel import FixedModel
+    from kfpga.core.errors import InputError
+    from kfpga.core.fixedmodel import FixedModel
     from kfpga.model import tukey53h
 
     if len(y) < tukey53h.MIN_OFFLINE:
@@ -568,9 +568,9 @@ def _offline_53h(args, config, y):
 
 def _run_tracks(args, config):
     """``kfpga filter --tracks N``: a multi-target replay through per-(track, axis) states."""
-    from kfpga.csvio import read_samples, write_columns
-    from kfpga.errors import InputError
-    from kfpga.fixedmodel import FixedModel
+    from kfpga.core.errors import InputError
+    from kfpga.core.fixedmodel import FixedModel
+    from kfpga.flows.csvio import read_samples, write_columns
     from kfpga.hw.alphabeta import MAX_TRACKS
 
     if config.filter != "alpha-beta":
@@ -664,7 +664,7 @@ def _run_formats(args):
 
 
 def _adc_channel(text):
-    from kfpga.ads8364 import CHANNELS
+    from kfpga.core.ads8364 import CHANNELS
 
     if text.upper() in CHANNELS:
         return CHANNELS.index(text.upper())
@@ -704,12 +704,12 @@ def _check_channel(args, config=None):
 
 
 def _run_generate(args):
-    from kfpga.ads8364 import CHANNELS
+    from kfpga.core.ads8364 import CHANNELS
+    from kfpga.core.paths import check_output_dir
+    from kfpga.core.tools import iverilog_parse, iverilog_path, verilator_lint
+    from kfpga.flows.quartus import write_project
     from kfpga.hw.generate import TOP_NAME
     from kfpga.hw.top import out_field
-    from kfpga.paths import check_output_dir
-    from kfpga.quartus import write_project
-    from kfpga.tools import iverilog_parse, iverilog_path, verilator_lint
 
     check_output_dir(args.out, option="--out")
     _check_channel(args)
@@ -756,9 +756,9 @@ def _run_generate(args):
 
 
 def _run_pins(args):
+    from kfpga.core.paths import check_output_file
+    from kfpga.flows.quartus import pin_table
     from kfpga.hw.top import out_field
-    from kfpga.paths import check_output_file
-    from kfpga.quartus import pin_table
 
     if args.write:
         check_output_file(args.write, option="--write", inputs=(args.pins, args.config), extensions=(".csv",))
@@ -785,10 +785,10 @@ def _run_resources(args):
 
     from tqdm import tqdm
 
+    from kfpga.flows.quartus import io_timing
     from kfpga.hw.generate import write_block, write_top
     from kfpga.hw.resources import EP2C20, ecp5_fmax, estimate
     from kfpga.hw.timing import DERATE_C8
-    from kfpga.quartus import io_timing
 
     config = _load_config(args, hardware=True)
     six = args.channels == 6
@@ -908,10 +908,10 @@ def _run_simulate(args):
 
     from tqdm import tqdm
 
-    from kfpga.ads8364 import CHANNELS
+    from kfpga.core.ads8364 import CHANNELS
+    from kfpga.core.tools import simulator_available
     from kfpga.sim import system
     from kfpga.sim.runner import SimulationFailed, build, run
-    from kfpga.tools import simulator_available
 
     _check_channel(args)
     config = _load_config(args, hardware=True)
@@ -970,7 +970,7 @@ def _run_simulate(args):
         return 1
     waves = []
     if args.waves and args.simulator == "verilator":
-        from kfpga.tools import verilator_fst
+        from kfpga.core.tools import verilator_fst
 
         if not verilator_fst():
             _info("Verilator writes VCD here: its FST writer needs the lz4 headers (Debian: apt-get install liblz4-dev)")
@@ -1028,8 +1028,8 @@ def _run_simulate(args):
 
 
 def _run_testbench(args):
+    from kfpga.core.tools import simulator_available
     from kfpga.sim.testbench import run_icarus, write_testbench
-    from kfpga.tools import simulator_available
 
     _check_channel(args)
     config = _load_config(args, hardware=True)
@@ -1070,7 +1070,7 @@ def _run_testbench(args):
 def _report_evaluation(args, plot, result, name, keys):
     """The end of every ``kfpga evaluate``: the plot if asked for, then the table, or JSON of
     ``keys`` with the findings; ``name`` picks ``evaluation.<name>_plot|_table|_findings``."""
-    from kfpga import evaluation
+    from kfpga.flows import evaluation
 
     if plot:
         getattr(evaluation, f"{name}_plot")(result, plot)
@@ -1083,7 +1083,7 @@ def _report_evaluation(args, plot, result, name, keys):
 
 
 def _run_evaluate_alpha_beta(args):
-    from kfpga import evaluation
+    from kfpga.flows import evaluation
 
     plot = _check_plot(args.plot)
     if args.targets > 256:
@@ -1095,7 +1095,7 @@ def _run_evaluate_alpha_beta(args):
 
 
 def _run_evaluate_53h(args):
-    from kfpga import evaluation
+    from kfpga.flows import evaluation
 
     plot = _check_plot(args.plot)
     seed = _pick_seed(args.seed)
@@ -1105,9 +1105,9 @@ def _run_evaluate_53h(args):
 
 
 def _run_evaluate_roll(args):
-    from kfpga import evaluation
-    from kfpga.csvio import read_series
-    from kfpga.errors import InputError
+    from kfpga.core.errors import InputError
+    from kfpga.flows import evaluation
+    from kfpga.flows.csvio import read_series
     from kfpga.model import roll
 
     plot = _check_plot(args.plot)
@@ -1137,7 +1137,7 @@ def _run_evaluate_roll(args):
 
 
 def _run_evaluate_ls_frontend(args):
-    from kfpga import evaluation
+    from kfpga.flows import evaluation
 
     plot = _check_plot(args.plot)
     seed = _pick_seed(args.seed)
@@ -1150,7 +1150,7 @@ def _run_evaluate_ls_frontend(args):
 
 
 def _run_filters(args):
-    from kfpga import registry
+    from kfpga.core import registry
 
     rows = [{"name": s.name, "summary": s.summary, "variants": {n: v.summary for n, v in s.variants.items()},
              "inputs": [n for n, _ in s.inputs_for(s.params())],
@@ -1477,7 +1477,7 @@ def synopsis(width=110):
 
 
 def main(argv=None):
-    from kfpga.errors import USER_ERRORS
+    from kfpga.core.errors import USER_ERRORS
 
     parser = build_parser()
     args, extra = parser.parse_known_args(argv)

@@ -38,13 +38,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kfpga.errors import ConfigError
-from kfpga.formats import register_formats
+from kfpga.core.errors import ConfigError
+from kfpga.core.formats import register_formats
+from kfpga.core.params import number, vector
+from kfpga.core.spec import Constant, FilterSpec, Output, Variant
 from kfpga.model import kalman2 as eq
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
 from kfpga.model.reference import steady_error_std
-from kfpga.params import number, vector
-from kfpga.spec import Constant, FilterSpec, Output, Variant
 
 __all__ = ["AlphaBetaParams", "SPEC", "POINTS", "update", "reference", "benedict_bordner", "critically_damped",
            "kalman_relation", "from_kalman", "stable"]

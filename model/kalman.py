@@ -35,12 +35,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kfpga.errors import ConfigError
-from kfpga.fixed import QFormat
-from kfpga.formats import noise_frac_bits, register_formats
+from kfpga.core.errors import ConfigError
+from kfpga.core.fixed import QFormat
+from kfpga.core.formats import noise_frac_bits, register_formats
+from kfpga.core.params import matrix, number
+from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
-from kfpga.params import matrix, number
-from kfpga.spec import Constant, FilterSpec, Output, Point, Variant
 
 __all__ = ["StateSpaceParams", "SPEC", "PRESETS", "dare_gain", "reference", "steady_update", "full_update", "free",
            "PBHError", "predict_sums", "predict", "observe", "innovations", "gain_products", "correct", "covariance_fp",
@@ -186,7 +186,7 @@ def free(value):
 
 def exact_format(value):
     """A format holding 0 or +-2**k exactly, with as few fraction bits as it needs."""
-    from kfpga.fixed import QFormat
+    from kfpga.core.fixed import QFormat
 
     if value == 0:
         return QFormat(2, 0)
@@ -471,7 +471,7 @@ def _matrix_constants(params):
 
 
 def _structure(params):
-    from kfpga.fixed import QFormat
+    from kfpga.core.fixed import QFormat
 
     return {"n": params.n, "m": params.m, "observations": params.observations, "zero": Constant(0.0, QFormat(2, 0))}
 
@@ -735,9 +735,9 @@ def _random_params(rng):
 
 
 def _scenario(name, count, seed, params):
-    """The scenarios of ``kfpga/scenarios.py`` for the first state (a position, an angle), its
+    """The scenarios of ``model/scenarios.py`` for the first state (a position, an angle), its
     derivatives for the others, each observation its row of H plus noise of variance R_jj."""
-    from kfpga import scenarios
+    from kfpga.model import scenarios
 
     rng = np.random.default_rng(seed)
     if name == "sine":

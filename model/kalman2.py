@@ -4,7 +4,7 @@ Both variants run in the datapath's units (``v = T*x2``, ``P' = D P D``, see
 :meth:`~kfpga.model.reference.KalmanParams.scaled`), so T never multiplies inside the loop.
 Every quantity written to a register is an exact sum or product written once into the format
 of its quantisation point (:data:`POINTS`), with that format's rounding and overflow rule.
-The stage functions below are that arithmetic; the bit-accurate model (``kfpga/fixedmodel.py``),
+The stage functions below are that arithmetic; the bit-accurate model (``kfpga/core/fixedmodel.py``),
 the RTL cores (``hw/kalman2.py``), the range analysis, the width checks and the exact-rational
 spec all run these same functions.
 
@@ -26,7 +26,7 @@ Time-varying (SPEC §1 with the paper's two misprints corrected; ``Q' = T^2 Q`` 
     p11  = [pl11 - K1*pl11]_p            p12  = [pl12 - K1*pl12]_p
     p21  = [pl21 - K2*pl11]_p            p22  = [pl22 - K2*pl12]_p
 
-``div(n, d)`` is the restoring divider (:meth:`kfpga.ops.Ops.div`): ``|n|/d`` truncated to
+``div(n, d)`` is the restoring divider (:meth:`kfpga.core.ops.Ops.div`): ``|n|/d`` truncated to
 ``gain.frac_bits``, saturated to ``gain``'s largest value, given the sign of ``n``.
 
 The output ``x2 = v / T`` is ``[v]_x2`` read with the binary point moved by k when ``T = 2**k``
@@ -40,12 +40,12 @@ import math
 
 import numpy as np
 
-from kfpga.errors import ConfigError
-from kfpga.fixed import QFormat, Rounding
-from kfpga.formats import noise_frac_bits, register_formats
+from kfpga.core.errors import ConfigError
+from kfpga.core.fixed import QFormat, Rounding
+from kfpga.core.formats import noise_frac_bits, register_formats
+from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
 from kfpga.model.reference import KalmanParams, kalman_decomposed, steady_error_std, steady_state, steady_state_gain
-from kfpga.spec import Constant, FilterSpec, Output, Point, Variant
 
 __all__ = ["SPEC", "POINTS", "t_exponent", "steady_gain", "finish_formats", "predict", "innovation", "correct", "rate",
            "rate_operand", "rate_product", "rate_write",

@@ -31,10 +31,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kfpga.ads8364 import CODE_FORMAT, CODE_MAX
-from kfpga.fixed import QFormat, Rounding, bits_for
-from kfpga.params import number
-from kfpga.spec import Constant, FilterSpec, Output, Point, Variant
+from kfpga.core.ads8364 import CODE_FORMAT, CODE_MAX
+from kfpga.core.fixed import QFormat, Rounding, bits_for
+from kfpga.core.params import number
+from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
 
 #: The longest window the table may name.
 MAX_WINDOW = 64
@@ -513,7 +513,7 @@ def _ranges(params, stimulus=None):
 
 
 def _default_formats(params, ranges, *, operand_bits, state_frac):
-    from kfpga.formats import noise_frac_bits, register_formats
+    from kfpga.core.formats import noise_frac_bits, register_formats
 
     formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac)
     # an innovation's step small against the noise of the observation it carries (a quarter of
@@ -553,7 +553,7 @@ def _scenario(name, n, seed, params):
     """A ship's speed log in codes: ``sine``, 5 m/s varying by 2 m/s over 600 samples; ``random-accel``,
     the model's own (white changes of the acceleration of variance q), from 5 m/s; both with the
     log's noise r. The truth is the speed (codes)."""
-    from kfpga.scenarios import adc_codes
+    from kfpga.model.scenarios import adc_codes
 
     rng = np.random.default_rng([seed, 3])
     k = np.arange(n)

@@ -2,7 +2,7 @@
 
 The default formats are chosen from these ranges (plus a guard bit), and a user's formats are
 checked against them. :func:`float_ranges` runs a filter's own stage functions in float
-(:class:`~kfpga.compiled.FloatTraceOps`, the compiled form of :class:`~kfpga.ops.FloatOps`),
+(:class:`~kfpga.core.compiled.FloatTraceOps`, the compiled form of :class:`~kfpga.core.ops.FloatOps`),
 recording every value written into each point, so the ranges come from exactly the arithmetic
 the hardware does, without its rounding. The stimulus covers the whole
 input range of the 16-bit ADC, driven the way real signals use it: full-scale steps in both
@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from kfpga.ads8364 import CODE_MAX, CODE_MIN
-from kfpga.compiled import compile_float_ranges
+from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.core.compiled import compile_float_ranges
 
 __all__ = ["RANGE_SEED", "SEGMENT", "full_scale_stimulus", "float_ranges"]
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from kfpga.params import matrix, number, vector
+from kfpga.core.params import matrix, number, vector
 
 __all__ = [
     "KalmanParams",

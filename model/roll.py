@@ -36,10 +36,10 @@ from importlib import resources
 
 import numpy as np
 
-from kfpga.fixed import QFormat
-from kfpga.formats import MAX_OPERAND_BITS
-from kfpga.params import matrix, number
-from kfpga.spec import Constant, FilterSpec, Output, Point, Variant
+from kfpga.core.fixed import QFormat
+from kfpga.core.formats import MAX_OPERAND_BITS
+from kfpga.core.params import matrix, number
+from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
 
 __all__ = ["RollParams", "PAPER_P0", "transition", "predict", "table1", "synthetic_roll", "MIN_SAMPLES", "SPEC",
            "sqrt_update", "plain_update", "pair_update", "PAIR", "PHASE", "FILTER_STATE", "unit_matrices", "reference",
@@ -502,7 +502,7 @@ def _ranges(params, stimulus=None):
 
 
 def _default_formats(params, ranges, *, operand_bits, state_frac):
-    from kfpga.formats import register_formats
+    from kfpga.core.formats import register_formats
 
     formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac)
     # the innovation as fine as the angle: the gain of the angle is close to 1 (s = 100 keeps the
@@ -540,7 +540,7 @@ def _goals(config, variant, channels=1):
 def _scenario(name, n, seed, params):
     """The synthetic roll series in codes (both scenarios); the truth of the prediction at
     sample k is the clean roll at sample k + 2."""
-    from kfpga.scenarios import adc_codes
+    from kfpga.model.scenarios import adc_codes
 
     if name not in ("sine", "random-accel"):
         raise ValueError(f"scenario must be one of sine, random-accel, not {name!r}")
@@ -581,7 +581,7 @@ COVARIANCE_POINTS = {"sqrt": (("d", "s", "rs", "kn"), ("k", "cs", "f")), "plain"
 
 
 def _codes(z, params):
-    from kfpga.scenarios import adc_codes
+    from kfpga.model.scenarios import adc_codes
 
     return adc_codes(np.asarray(z, dtype=np.float64) / params.lsb)
 
@@ -611,7 +611,7 @@ def predict_fixed(z, config, variant="sqrt", *, check=False):
     aligned as :func:`predict`'s, overflowed updates, updates whose covariance is not positive
     definite)``; the last is counted only with ``check`` (one model call per sample, the
     covariance of the filter that took it)."""
-    from kfpga.fixedmodel import FixedModel
+    from kfpga.core.fixedmodel import FixedModel
 
     params = config.params
     codes = _codes(z, params)
@@ -634,7 +634,7 @@ def word_config(base, variant, register_frac, operand_bits):
     """``base`` with the covariance path of ``variant`` at ``register_frac`` fraction bits in its
     registers and ``operand_bits``-bit multiplier operands (each keeping its integer bits); or the
     reason there is none (an intermediate past the model's 62 bits)."""
-    from kfpga.config import ConfigError, FilterConfig
+    from kfpga.core.config import ConfigError, FilterConfig
 
     registers, operands = COVARIANCE_POINTS[variant]
     formats = dict(base.formats)
@@ -652,7 +652,7 @@ def word_sweep(z, params=None, *, register_fracs=(0, 4, 8), operand_bits=(12, 14
     """Both forms of the predictor over word lengths: for each form, register fraction bits and
     operand width, the updates whose covariance is not positive definite, the overflowed updates,
     the prediction RMSE (deg) and the largest difference from the float predictor (same start)."""
-    from kfpga.config import FilterConfig
+    from kfpga.core.config import FilterConfig
 
     params = RollParams() if params is None else params
     z = np.asarray(z, dtype=np.float64)

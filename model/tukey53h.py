@@ -42,11 +42,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from kfpga.ads8364 import CODE_FORMAT, CODE_MAX
-from kfpga.fixed import QFormat, Rounding
-from kfpga.formats import precision_frac_bits
-from kfpga.params import number
-from kfpga.spec import Constant, FilterSpec, Output, Point, Variant
+from kfpga.core.ads8364 import CODE_FORMAT, CODE_MAX
+from kfpga.core.fixed import QFormat, Rounding
+from kfpga.core.formats import precision_frac_bits
+from kfpga.core.params import number
+from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
 
 __all__ = ["Tukey53HParams", "SPEC", "POINTS", "FLAG", "DELAY", "MIN_OFFLINE", "update", "median5", "median3",
            "MEDIAN5", "MEDIAN3", "network_layer", "network_reads", "hanning_partial", "hanning", "residual", "decide",
@@ -336,7 +336,7 @@ def _scenario(name, n, seed, params):
     """The test signals of ``compare``/``simulate``: the named scenario (with noise of variance
     4) and seeded outliers (:func:`inject_outliers`); the truth is the clean signal, 4 samples
     late as the output is."""
-    from kfpga.scenarios import random_accel, sine
+    from kfpga.model.scenarios import random_accel, sine
 
     if name == "sine":
         truth, codes = sine(n, seed, noise_var=4.0)
@@ -368,7 +368,7 @@ def _formal_config():
     """3-bit samples for the formal stream checks: the core's handshake (one enable for every
     stage, the valid bits) does not depend on the widths, and 16-bit comparator networks over
     the 36 cycles that fill its 15 registers take the solver beyond a quarter of an hour."""
-    from kfpga.config import FilterConfig
+    from kfpga.core.config import FilterConfig
 
     narrow = QFormat(3, 0)
     return FilterConfig(filter="53h", params=Tukey53HParams(threshold=1.0), check_ranges=False,

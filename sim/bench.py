@@ -18,7 +18,7 @@ from cocotb.clock import Clock
 from cocotb.simtime import get_sim_time
 from cocotb.triggers import ClockCycles, Edge, Event, FallingEdge, ReadOnly, RisingEdge, Timer
 
-from kfpga.board import SYSTEM_PERIOD_NS
+from kfpga.core.board import SYSTEM_PERIOD_NS
 from kfpga.hw.ads8364 import SampleLayout
 from kfpga.hw.layouts import input_layout, output_layout
 from kfpga.sim.ads8364 import ADS8364

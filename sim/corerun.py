@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from amaranth.hdl import Shape
 
-from kfpga.config import FilterConfig
+from kfpga.core.config import FilterConfig
 from kfpga.hw.layouts import input_layout, output_layout
 from kfpga.sim.scoreboard import Scoreboard
 from kfpga.sim.system import DEFAULT_ROOT, SystemRunFailed, compile_cached

@@ -19,9 +19,9 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
-from kfpga.config import FilterConfig
+from kfpga.core.config import FilterConfig
+from kfpga.core.tools import simulator_available, verilator_env, verilator_fst
 from kfpga.hw.generate import TOP_NAME, write_block, write_top
-from kfpga.tools import simulator_available, verilator_env, verilator_fst
 
 __all__ = ["SIMULATORS", "Built", "build", "run", "SimulationFailed", "file_lock"]
 
@@ -79,7 +79,7 @@ def build(simulator, design, *, config=None, root=DEFAULT_ROOT, waves=False, qui
     """Generate ``design``'s Verilog and compile it for ``simulator`` (cached by content).
 
     ``verilog_text`` replaces the generated Verilog (same top level and ports), e.g. a mutant
-    of it (``kfpga/mutate.py``)."""
+    of it (``kfpga/verify/mutate.py``)."""
     from cocotb_tools.runner import VerilatorControlFile, get_runner
 
     ok, why = simulator_available(simulator)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kfpga.fixedmodel import FixedModel
+from kfpga.core.fixedmodel import FixedModel
 
 __all__ = ["Scoreboard"]
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from kfpga import scenarios
-from kfpga.ads8364 import CODE_MAX, CODE_MIN
-from kfpga.csvio import read_header, read_samples
+from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.flows.csvio import read_header, read_samples
+from kfpga.model import scenarios
 from kfpga.model.reference import KalmanParams
 
 __all__ = ["Source", "scenario_source", "csv_source", "stress_codes", "threshold_codes"]

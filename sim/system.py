@@ -32,9 +32,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from kfpga.ads8364 import CODE_MAX, CODE_MIN
-from kfpga.analysis import float_run, rmse, sqnr_db
-from kfpga.config import FilterConfig
+from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.core.config import FilterConfig
+from kfpga.flows.analysis import float_run, rmse, sqnr_db
 from kfpga.sim.ads8364 import Read
 from kfpga.sim.scoreboard import Scoreboard
 from kfpga.sim.sources import csv_source, scenario_source
@@ -324,8 +324,8 @@ def compile_cached(simulator, tag, write, top, *, root=DEFAULT_ROOT):
     Verilator builds ``top`` with the C++ clock loop of ``cosim_main.cpp``; Icarus builds
     ``<top>_clock``, which the files must hold, around it.
     """
+    from kfpga.core.tools import iverilog_path, simulator_available, verilator_env, verilator_root
     from kfpga.sim.runner import file_lock
-    from kfpga.tools import iverilog_path, simulator_available, verilator_env, verilator_root
 
     ok, why = simulator_available(simulator)
     if not ok:

@@ -7,7 +7,7 @@ from cocotb.clock import Clock
 from cocotb.simtime import get_sim_time
 from cocotb.triggers import ClockCycles, Edge, ReadOnly, RisingEdge
 
-from kfpga.board import SYSTEM_PERIOD_NS
+from kfpga.core.board import SYSTEM_PERIOD_NS
 from kfpga.sim.bench import deadline, sim_params, write_results
 
 

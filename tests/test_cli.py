@@ -10,7 +10,7 @@ import pytest
 from expected import FILTERS, REGISTERED
 
 from kfpga.cli import main
-from kfpga.fixedmodel import FixedModel
+from kfpga.core.fixedmodel import FixedModel
 
 COMPARE_KEYS = {"variant", "samples", "seed", "rmse_raw", "rmse_float", "rmse_fixed",
                 "max_abs_fixed_minus_float_lsb", "sqnr_db", "overflows"}
@@ -209,7 +209,7 @@ def test_readme_synopsis_is_the_parsers():
 
 
 def test_pins_write_follows_the_out_field_width(capsys, tmp_path):
-    from kfpga.quartus import BUILTIN_OUT_BITS, SPARE_OUT_PINS, load_pins
+    from kfpga.flows.quartus import BUILTIN_OUT_BITS, SPARE_OUT_PINS, load_pins
 
     # 28 bits: the two bits past the built-in 26 take the first spare pins of the board
     cfg = tmp_path / "wide.toml"

@@ -194,7 +194,7 @@ def test_argparse_errors_end_with_the_one_line_error():
 
 def test_the_tool_runs_from_an_unactivated_venv(tmp_path):
     """No venv on PATH (a user runs .venv/bin/kfpga): Yosys still comes from the interpreter's package."""
-    from kfpga.tools import yosys_command
+    from kfpga.core.tools import yosys_command
 
     env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
     result = subprocess.run(yosys_command("-q", "-p", "help"), capture_output=True, text=True, env=env, cwd=tmp_path,

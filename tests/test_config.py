@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from expected import REGISTERED
 
-from kfpga.config import ConfigError, FilterConfig, analysed_ranges
-from kfpga.fixed import QFormat
+from kfpga.core.config import ConfigError, FilterConfig, analysed_ranges
+from kfpga.core.fixed import QFormat
 from kfpga.model.kalman2 import POINTS
 from kfpga.model.reference import KalmanParams
 
@@ -177,7 +177,7 @@ def test_toml_round_trip(tmp_path):
 
 
 def test_toml_errors(tmp_path):
-    from kfpga.errors import InputError
+    from kfpga.core.errors import InputError
 
     with pytest.raises(InputError, match=exactly(f"{tmp_path / 'missing.toml'}: no such config file")):
         KalmanConfig.from_toml(tmp_path / "missing.toml")

@@ -74,7 +74,7 @@ def _core_words(config, n, channels, seed, order):
 def test_core_in_simulator_full_rate(simulator, variant, channels, cycles, samples, seed):
     """The core with its stream source and sink in the simulator (kfpga.sim.corerun): the same
     checks as the cocotb bench, at the simulator's speed."""
-    from kfpga.config import FilterConfig
+    from kfpga.core.config import FilterConfig
     from kfpga.sim import corerun
 
     config = FilterConfig()
@@ -90,7 +90,7 @@ def test_core_in_simulator_full_rate(simulator, variant, channels, cycles, sampl
 @pytest.mark.parametrize(("variant", "channels"), [("steady", 4), ("full", 1)], ids=["steady-4ch", "full"])
 def test_core_in_simulator_backpressure(simulator, variant, channels, seed):
     """Random idle cycles and backpressure; the channel states in random order."""
-    from kfpga.config import FilterConfig
+    from kfpga.core.config import FilterConfig
     from kfpga.sim import corerun
 
     config = FilterConfig()
@@ -105,7 +105,7 @@ def test_core_in_simulator_backpressure(simulator, variant, channels, seed):
 def test_core_in_simulator_sees_a_wrong_model(seed):
     """The in-simulator core path can fail: the model told another R differs."""
     need("verilator")
-    from kfpga.config import FilterConfig
+    from kfpga.core.config import FilterConfig
     from kfpga.sim import corerun
 
     built = corerun.build("verilator", config=FilterConfig(), variant="steady", channels=4)
@@ -127,7 +127,7 @@ def test_clock_divider(simulator, ratio, seed):
 def test_restoring_divider_alone(simulator, seed):
     """The time-varying core's divider at its widths: every quotient and flag against integer
     division, operands on the overflow boundary, divisor 0 and 1, backpressure."""
-    from kfpga.formal import divider_widths
+    from kfpga.verify.formal import divider_widths
 
     widths = divider_widths()
     n = 3000 if simulator == "verilator" else 1500
@@ -228,7 +228,7 @@ def test_system_six_channels(simulator, variant, seed):
 def test_fast_regression_sees_a_wrong_model(seed):
     """The fast path can fail: the design built with R = 0.5, the model told R = 2, differ."""
     need("verilator")
-    from kfpga.config import FilterConfig
+    from kfpga.core.config import FilterConfig
 
     built = system.build("verilator", config=FilterConfig(), variant="steady", channel=1)
     other = FilterConfig.from_dict({"model": {"R": 2.0}}, source="test")
@@ -281,7 +281,7 @@ def test_simulate_waves(simulator, capsys, monkeypatch, tmp_path):
     assert len(result["waves"]) == 1
     wave = tmp_path / result["waves"][0]
     assert wave.parent == tmp_path / "build" / "waves"
-    from kfpga.tools import verilator_fst
+    from kfpga.core.tools import verilator_fst
 
     if simulator == "icarus" or verilator_fst():
         assert wave.suffix == ".fst" and wave.stat().st_size > 1000  # FST is compressed binary

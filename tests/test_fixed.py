@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from fxpmath import Fxp
 
-from kfpga.fixed import Overflow, QFormat, Rounding, bits_for, requantize, shift_round, to_raw
+from kfpga.core.fixed import Overflow, QFormat, Rounding, bits_for, requantize, shift_round, to_raw
 
 # -- the format type ---------------------------------------------------------------------
 

@@ -1,5 +1,5 @@
 # amaranth: UnusedElaboratable=no
-"""The formal flow itself (kfpga/formal.py): the quick proofs pass, and a planted bug fails.
+"""The formal flow itself (kfpga/verify/formal.py): the quick proofs pass, and a planted bug fails.
 
 ``make formal`` runs every property (CI runs it after ``make test``); here the quick ones run,
 so that a broken flow (a property proven vacuously, a solver not found) fails the test suite.
@@ -9,9 +9,9 @@ import dataclasses
 
 import pytest
 
-from kfpga import formal
 from kfpga.hw.clockdiv import ClockDivider
-from kfpga.hw.properties import ClockDividerProps, ControllerProps, DividerProps
+from kfpga.verify import formal
+from kfpga.verify.properties import ClockDividerProps, ControllerProps, DividerProps
 
 pytestmark = pytest.mark.xdist_group("formal")
 

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from kfpga.config import FilterConfig
-from kfpga.fixed import QFormat
-from kfpga.fixedmodel import FixedModel
+from kfpga.core.config import FilterConfig
+from kfpga.core.fixed import QFormat
+from kfpga.core.fixedmodel import FixedModel
 from kfpga.model.reference import KalmanParams
 
 GOLDEN = np.load(Path(__file__).parent / "golden" / "kalman2.npz")

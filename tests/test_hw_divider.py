@@ -6,7 +6,7 @@ import random
 import pytest
 from amaranth.sim import Simulator
 
-from kfpga.config import FilterConfig
+from kfpga.core.config import FilterConfig
 from kfpga.hw.divider import Divider
 from kfpga.hw.kalman2 import FullKalman
 from kfpga.sim.amaranth_streams import run_with_deadline

@@ -5,10 +5,10 @@ import re
 import pytest
 
 from kfpga.cli import main
-from kfpga.config import FilterConfig
+from kfpga.core.config import FilterConfig
+from kfpga.core.tools import iverilog_parse, iverilog_path, verilator_lint
 from kfpga.hw.generate import FORBIDDEN, LINT_WAIVERS, TOP_NAME, write_block, write_top
 from kfpga.hw.top import PORTS
-from kfpga.tools import iverilog_parse, iverilog_path, verilator_lint
 
 DESIGNS = [("steady", False), ("full", False), ("steady", True), ("full", True)]
 

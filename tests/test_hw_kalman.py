@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from simulators import need
 
-from kfpga import registry
-from kfpga.ads8364 import CODE_MAX, CODE_MIN
-from kfpga.config import ConfigError, FilterConfig
+from kfpga.core import registry
+from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.core.config import ConfigError, FilterConfig
 from kfpga.hw.generate import figures_only
 from kfpga.hw.kalman import FullCore, SteadyCore, default_stages
 from kfpga.model.kalman import SPEC

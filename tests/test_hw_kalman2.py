@@ -15,9 +15,9 @@ import pytest
 from amaranth.sim import Simulator
 from test_golden import GOLDEN, golden_config
 
-from kfpga.config import FilterConfig
-from kfpga.fixed import QFormat
-from kfpga.fixedmodel import FixedModel
+from kfpga.core.config import FilterConfig
+from kfpga.core.fixed import QFormat
+from kfpga.core.fixedmodel import FixedModel
 from kfpga.hw.kalman2 import SteadyKalman, make_core
 from kfpga.model.reference import KalmanParams
 from kfpga.sim.amaranth_streams import measure_timing, run_core, run_with_deadline

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from amaranth.sim import Simulator
 
-from kfpga.board import SYSTEM_PERIOD_NS
-from kfpga.config import FilterConfig
+from kfpga.core.board import SYSTEM_PERIOD_NS
+from kfpga.core.config import FilterConfig
 from kfpga.hw.top import FilterSystem
 from kfpga.sim.ads8364 import ADS8364
 from kfpga.sim.amaranth_streams import run_with_deadline

@@ -78,7 +78,7 @@ def test_evaluate_ls_frontend_cli(tmp_path, capsys, seed):
 
 
 def _fixed(params=None, **formats):
-    from kfpga.config import FilterConfig
+    from kfpga.core.config import FilterConfig
 
     return FilterConfig(filter="ls-frontend", params=params or ls.LSFrontParams(), formats=formats)
 
@@ -93,7 +93,7 @@ def _speed_log(rng, n, params):
 def test_running_sums_are_the_windows_exact_sums(seed):
     """The state's S0 and S1 of every window after each sample: the sums over the last n codes
     (zeros before the first), computed here directly."""
-    from kfpga.fixedmodel import FixedModel
+    from kfpga.core.fixedmodel import FixedModel
 
     rng = np.random.default_rng(seed)
     config = _fixed()
@@ -112,9 +112,9 @@ def test_running_sums_are_the_windows_exact_sums(seed):
 
 def test_fit_is_polyfit_within_its_roundings(seed):
     """The observations of a full window in the model's integers (the stage function ``fit`` on
-    :class:`~kfpga.ops.IntOps`): numpy's least-squares line at the newest sample and its slope,
+    :class:`~kfpga.core.ops.IntOps`): numpy's least-squares line at the newest sample and its slope,
     within the rounding of the points b and fv and of the constants 2^s/D and 2^t/n."""
-    from kfpga.ops import IntOps
+    from kfpga.core.ops import IntOps
 
     rng = np.random.default_rng(seed)
     params = ls.LSFrontParams()
@@ -172,7 +172,7 @@ def test_switched_filter_settles_onto_the_time_varying_one(seed):
 def test_bit_accurate_front_end_follows_its_float_form(seed):
     """The model's integers against the switched filter in float: far within the speed log's
     noise, the same window nearly everywhere, no overflow on a ship's speeds."""
-    from kfpga.fixedmodel import FixedModel
+    from kfpga.core.fixedmodel import FixedModel
 
     rng = np.random.default_rng(seed)
     config = _fixed()
@@ -197,9 +197,9 @@ def test_core_is_bit_exact_through_a_deceleration(simulator, seed):
     """The generated Verilog of the front end and its filter on the patent's scenario (400 s: the
     cruise, the deceleration, the stop), with random valid/ready: the raw velocity at the start
     (m = 1) and every window of the table are used, and every output is the model's."""
-    from kfpga.evaluation import DecelerationScenario, deceleration_log
-    from kfpga.fixedmodel import FixedModel
-    from kfpga.scenarios import adc_codes
+    from kfpga.core.fixedmodel import FixedModel
+    from kfpga.flows.evaluation import DecelerationScenario, deceleration_log
+    from kfpga.model.scenarios import adc_codes
 
     config = _fixed()
     _, _, v, _ = deceleration_log(DecelerationScenario(seconds=400), seed)

@@ -15,16 +15,16 @@ import pytest
 import scipy.linalg
 from filterpy.kalman import KalmanFilter
 
-from kfpga import registry
-from kfpga.analysis import compare
-from kfpga.config import ConfigError, FilterConfig
-from kfpga.csvio import read_samples
-from kfpga.errors import InputError
-from kfpga.fixed import QFormat
-from kfpga.fixedmodel import FixedModel
+from kfpga.core import registry
+from kfpga.core.config import ConfigError, FilterConfig
+from kfpga.core.errors import InputError
+from kfpga.core.fixed import QFormat
+from kfpga.core.fixedmodel import FixedModel
+from kfpga.core.ops import FloatOps
+from kfpga.flows.analysis import compare
+from kfpga.flows.csvio import read_samples
 from kfpga.model.kalman import SPEC, StateSpaceParams, dare_gain, reference
-from kfpga.ops import FloatOps
-from kfpga.scenarios import for_config
+from kfpga.model.scenarios import for_config
 
 
 def exactly(text):

@@ -10,13 +10,13 @@ import re
 import numpy as np
 import pytest
 
-from kfpga.analysis import float_run, rmse
-from kfpga.config import FilterConfig
-from kfpga.fixedmodel import FixedModel
+from kfpga.core.config import FilterConfig
+from kfpga.core.fixedmodel import FixedModel
+from kfpga.core.ops import divide
+from kfpga.flows.analysis import float_run, rmse
 from kfpga.model.kalman2 import t_exponent
 from kfpga.model.reference import KalmanParams
-from kfpga.ops import divide
-from kfpga.scenarios import SINE_AMPLITUDE, SINE_PERIOD, sine
+from kfpga.model.scenarios import SINE_AMPLITUDE, SINE_PERIOD, sine
 
 
 def random_codes(rng, n):
@@ -110,7 +110,7 @@ def test_divide_matches_restoring_division_exhaustively():
 @pytest.mark.parametrize("scenario_seed", [1, 2, 3])
 def test_fixed_rmse_within_one_percent_of_float(variant, scenario_seed):
     """Default formats on the default scenario."""
-    from kfpga.analysis import compare
+    from kfpga.flows.analysis import compare
 
     truth, y = sine(20000, scenario_seed)
     m = compare(FilterConfig(), variant, y, truth).metrics

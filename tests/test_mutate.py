@@ -1,4 +1,4 @@
-"""The mutation run's input contract (kfpga/mutate.py): a one-channel core's channel field is
+"""The mutation run's input contract (kfpga/verify/mutate.py): a one-channel core's channel field is
 held at 0 in the equivalence checks, and nothing else is."""
 
 import re
@@ -8,9 +8,9 @@ import pytest
 from amaranth import Elaboratable, Module, Signal
 from amaranth.back import rtlil
 
-from kfpga import mutate
-from kfpga.config import FilterConfig
-from kfpga.formal import warm, yosys
+from kfpga.core.config import FilterConfig
+from kfpga.verify import mutate
+from kfpga.verify.formal import warm, yosys
 
 
 @pytest.fixture(scope="module", autouse=True)

@@ -15,12 +15,12 @@ from amaranth import Module, Signal, signed
 from amaranth.sim import Simulator
 from test_fixed import MODES, OVERFLOW_TABLE, ROUNDING_TABLE
 
-from kfpga.compiled import compile_stage
-from kfpga.fixed import QFormat
+from kfpga.core.compiled import compile_stage
+from kfpga.core.fixed import QFormat
+from kfpga.core.ops import FloatOps, FractionOps, IntOps, WidthOps
+from kfpga.core.spec import Constant
 from kfpga.hw.arith import AmaranthOps
-from kfpga.ops import FloatOps, FractionOps, IntOps, WidthOps
 from kfpga.sim.amaranth_streams import run_with_deadline
-from kfpga.spec import Constant
 
 SRC = QFormat(20, 6)  # the input of the one-write stages
 

@@ -12,12 +12,12 @@ import re
 import numpy as np
 import pytest
 
-from kfpga.analysis import compare, float_run, rmse
-from kfpga.config import ConfigError, FilterConfig
-from kfpga.fixedmodel import FixedModel
+from kfpga.core.config import ConfigError, FilterConfig
+from kfpga.core.fixedmodel import FixedModel
+from kfpga.flows.analysis import compare, float_run, rmse
 from kfpga.model.kalman import StateSpaceParams
 from kfpga.model.reference import KalmanParams
-from kfpga.scenarios import SINE_AMPLITUDE, SINE_PERIOD, for_config
+from kfpga.model.scenarios import SINE_AMPLITUDE, SINE_PERIOD, for_config
 
 GRID = list(itertools.product((0.001, 0.01, 0.1, 1.0, 8.0), (0.01, 2.0, 100.0), (0.01, 4.0, 1000.0)))
 
@@ -102,8 +102,8 @@ def test_small_measurement_noise_gives_the_innovation_fraction_bits():
 
 
 def test_outputs_coarse_against_the_filter_noise_are_warned(capsys):
-    from kfpga.analysis import precision_warnings
     from kfpga.cli import main
+    from kfpga.flows.analysis import precision_warnings
 
     assert precision_warnings(FilterConfig()) == []
     # x2's float error is 1.92 (steady state, T = 1, Q = 2, R = 4): whole steps add 1/sqrt(12) = 0.289

@@ -7,7 +7,7 @@ import pytest
 from simulators import need
 
 from kfpga.cli import main
-from kfpga.config import FilterConfig
+from kfpga.core.config import FilterConfig
 from kfpga.sim.runner import SIMULATORS
 
 pytestmark = pytest.mark.xdist_group("propose")  # one worker computes the shared proposal

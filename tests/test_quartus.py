@@ -7,12 +7,12 @@ import shlex
 import pytest
 
 from kfpga.cli import main
-from kfpga.config import FilterConfig
+from kfpga.core.config import FilterConfig
+from kfpga.core.tools import iverilog_parse, iverilog_path
+from kfpga.flows.quartus import PinError, load_pins, port_bits, write_project
 from kfpga.hw.resources import estimate
 from kfpga.hw.top import PORTS
 from kfpga.model.reference import KalmanParams
-from kfpga.quartus import PinError, load_pins, port_bits, write_project
-from kfpga.tools import iverilog_parse, iverilog_path
 
 
 def qsf_assignments(text):

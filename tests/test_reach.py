@@ -1,4 +1,4 @@
-"""The explicit-state equivalence check of data-independent mutants (kfpga/reach.py): its netlist
+"""The explicit-state equivalence check of data-independent mutants (kfpga/verify/reach.py): its netlist
 evaluation against the bit-accurate model, and its verdicts on mutants whose fate is known."""
 
 import json
@@ -11,11 +11,11 @@ from amaranth.lib import stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from kfpga import reach
-from kfpga.config import FilterConfig
-from kfpga.fixedmodel import FixedModel
-from kfpga.formal import warm, yosys
+from kfpga.core.config import FilterConfig
+from kfpga.core.fixedmodel import FixedModel
 from kfpga.hw.kalman2 import FullKalman
+from kfpga.verify import reach
+from kfpga.verify.formal import warm, yosys
 
 
 @pytest.fixture(scope="module", autouse=True)

@@ -122,7 +122,7 @@ def test_evaluate_roll_cli_errors(tmp_path, capsys):
 
 
 def test_read_series_header_is_optional(tmp_path):
-    from kfpga.csvio import read_series
+    from kfpga.flows.csvio import read_series
 
     path = tmp_path / "s.csv"
     path.write_text("# deg\nt,roll\n0,1.5\n0.5,-2\n")
@@ -136,8 +136,8 @@ def test_read_series_header_is_optional(tmp_path):
 
 def _float_run(variant, z, params):
     """The variant's stage functions in float64 (FloatOps), one filter, from its reset state."""
-    from kfpga.config import FilterConfig
-    from kfpga.ops import FloatOps
+    from kfpga.core.config import FilterConfig
+    from kfpga.core.ops import FloatOps
 
     config = FilterConfig(filter="roll", params=params)
     v = config.spec.variants[variant]
@@ -157,7 +157,7 @@ def _float_run(variant, z, params):
 def test_both_forms_are_the_kalman_filter_in_real_arithmetic(variant, seed):
     """The stage functions run in float (Potter's update and the Givens triangularisation, or the
     plain form) equal the plain matrix filter written independently (``roll.reference``)."""
-    from kfpga.scenarios import adc_codes
+    from kfpga.model.scenarios import adc_codes
 
     params = roll.RollParams(s=float(np.random.default_rng(seed).choice([1.0, 100.0])))
     _, y, _ = roll.synthetic_roll(120, seed)
@@ -170,7 +170,7 @@ def test_fixed_point_predictor_is_close_to_float(seed):
     """At its default formats the square-root predictor in the core's integers stays within a
     thousandth of a degree of float (same start), with no overflow and its covariance positive
     definite after every update."""
-    from kfpga.config import FilterConfig
+    from kfpga.core.config import FilterConfig
 
     _, y, _ = roll.synthetic_roll(480, seed)
     pred, overflowed, not_pd = roll.predict_fixed(y, FilterConfig(filter="roll"), check=True)
@@ -202,9 +202,9 @@ def test_core_is_the_interval_predictor_in_cocotb(simulator, seed):
     """The generated Verilog of the roll core on a roll series (the paper's table 1, then a
     synthetic series), with random valid/ready: every output is the model's, which is the
     combined interval predictor's prediction of the sample 2 ahead (``predict_fixed``)."""
-    from kfpga.config import FilterConfig
-    from kfpga.fixedmodel import FixedModel
-    from kfpga.scenarios import adc_codes
+    from kfpga.core.config import FilterConfig
+    from kfpga.core.fixedmodel import FixedModel
+    from kfpga.model.scenarios import adc_codes
 
     config = FilterConfig(filter="roll")
     _, table = roll.table1()

@@ -1,5 +1,5 @@
 # amaranth: UnusedElaboratable=no
-"""The sequential core (hw/sequencer.py) and its program (kfpga/program.py): any registered
+"""The sequential core (hw/sequencer.py) and its program (kfpga/core/program.py): any registered
 filter's update, on random configs (every rounding rule, wrap and saturate, narrow formats that
 overflow), gives the model's integers, in the program's own semantics and in the RTL."""
 
@@ -10,12 +10,12 @@ import pytest
 from amaranth.sim import Simulator
 from contract.test_contract import random_config, stimulus
 
-from kfpga import registry
-from kfpga.config import FilterConfig
-from kfpga.fixedmodel import FixedModel
+from kfpga.core import registry
+from kfpga.core.config import FilterConfig
+from kfpga.core.fixedmodel import FixedModel
+from kfpga.core.program import build_program, execute
 from kfpga.hw.sequencer import SequentialCore
 from kfpga.hw.sqrt import SquareRoot
-from kfpga.program import build_program, execute
 from kfpga.sim.amaranth_streams import run_stream, run_with_deadline
 from kfpga.sim.scoreboard import Scoreboard
 
@@ -35,7 +35,7 @@ def _words(config, y, channels):
 
 @pytest.mark.parametrize(("name", "variant"), CASES)
 def test_the_program_computes_the_models_integers(name, variant, seed):
-    """The program run by its own semantics (:func:`kfpga.program.execute`), three channels in
+    """The program run by its own semantics (:func:`kfpga.core.program.execute`), three channels in
     random order, against the model run channel by channel: every output, every flag."""
     rng = np.random.default_rng(seed)
     spec = registry.get(name)

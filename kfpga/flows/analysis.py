@@ -7,9 +7,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kfpga.config import FilterConfig, analysed_ranges, default_formats
-from kfpga.fixedmodel import FixedModel
-from kfpga.formats import MAX_OPERAND_BITS
+from kfpga.core.config import FilterConfig, analysed_ranges, default_formats
+from kfpga.core.fixedmodel import FixedModel
+from kfpga.core.formats import MAX_OPERAND_BITS
 
 __all__ = ["sample_count", "rmse", "sqnr_db", "float_run", "Comparison", "compare", "limit_cycles", "sweep",
            "precision_warnings",
@@ -286,7 +286,7 @@ def plot_compare(cmp_, path, title=""):
 def plot_sweep(rows, narrowest, path, title="", budget=0.01):
     """RMSE and SQNR against operand width: the budget band, the narrowest passing width and the
     width of one embedded multiplier marked."""
-    from kfpga.formats import MULTIPLIER_BITS
+    from kfpga.core.formats import MULTIPLIER_BITS
 
     plt = pyplot()
     bits = [r["bits"] for r in rows]

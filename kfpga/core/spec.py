@@ -1,7 +1,7 @@
 """What a filter is: the description every layer (model, RTL, CLI, benches, tests) reads.
 
-A filter is a :class:`FilterSpec` in the registry (``kfpga/registry.py``). Its arithmetic is
-written once, as stage functions over an ``ops`` object (``kfpga/ops.py``); the spec names the
+A filter is a :class:`FilterSpec` in the registry (``kfpga/core/registry.py``). Its arithmetic is
+written once, as stage functions over an ``ops`` object (``kfpga/core/ops.py``); the spec names the
 quantisation points those functions write, the state they carry, the outputs they give, and
 the pieces that cannot be derived: the float reference, the default-format rules, the core.
 """
@@ -19,7 +19,7 @@ __all__ = ["Point", "Output", "Variant", "FilterSpec", "Constant"]
 
 class Constant(NamedTuple):
     """A constant of an update: a real value, quantised once into the format of ``point`` (a point
-    name or a :class:`~kfpga.fixed.QFormat`); ``label`` names it in messages (``T^2*Q``)."""
+    name or a :class:`~kfpga.core.fixed.QFormat`); ``label`` names it in messages (``T^2*Q``)."""
 
     value: float
     point: object
@@ -71,7 +71,7 @@ class Output:
     """An output field: a CSV column, a payload field of the core, a scoreboard field.
 
     ``point``: the quantisation point it is written in, or a structural
-    :class:`~kfpga.fixed.QFormat` (a count, a mode: not a configurable point)."""
+    :class:`~kfpga.core.fixed.QFormat` (a count, a mode: not a configurable point)."""
 
     name: str
     point: object
@@ -98,7 +98,7 @@ class Variant:
         ``initial(params) -> {state name: real value}``: the state after reset.
     update:
         ``update(ops, k, x, u) -> (x_next, outputs)``: ``k`` the constants, ``x`` the state,
-        ``u`` the inputs, all :class:`~kfpga.ops.Fx`; returns dicts of Fx.
+        ``u`` the inputs, all :class:`~kfpga.core.ops.Fx`; returns dicts of Fx.
     applies:
         ``applies(params) -> None | why not``: whether these parameters can use the variant.
     hardware:
@@ -127,7 +127,7 @@ class Variant:
 
 @dataclass(frozen=True)
 class FilterSpec:
-    """A registered filter (see ``kfpga/registry.py`` and the README's "Add a filter").
+    """A registered filter (see ``kfpga/core/registry.py`` and the README's "Add a filter").
 
     Parameters
     ----------
@@ -169,7 +169,7 @@ class FilterSpec:
     scenario:
         ``scenario(name, n, seed, params) -> (truth of the default output, codes)``: the test
         signals of ``compare``, ``sweep`` and ``simulate`` (``codes`` an array for one input,
-        else ``{input: array}``); ``None`` uses ``kfpga/scenarios.py`` on one input.
+        else ``{input: array}``); ``None`` uses ``model/scenarios.py`` on one input.
     presets:
         ``{name: (summary, params factory)}``: named models, ``--preset NAME``.
     measured:

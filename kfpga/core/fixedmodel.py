@@ -1,10 +1,10 @@
 """The bit-accurate model of any registered filter: the integers its RTL core computes.
 
-:class:`FixedModel` runs a variant's update function (``kfpga/spec.py``), traced once per config
-into a compiled sample loop (``kfpga/compiled.py``): the scalar form for one channel, the numpy
+:class:`FixedModel` runs a variant's update function (``kfpga/core/spec.py``), traced once per config
+into a compiled sample loop (``kfpga/core/compiled.py``): the scalar form for one channel, the numpy
 form for a batch of channels. :meth:`FixedModel.run_ops` runs the same update through
-:class:`~kfpga.ops.IntOps` directly, sample by sample, and :meth:`FixedModel.run_exact` through
-exact rationals (:class:`~kfpga.ops.FractionOps`); the tests hold all of them equal.
+:class:`~kfpga.core.ops.IntOps` directly, sample by sample, and :meth:`FixedModel.run_exact` through
+exact rationals (:class:`~kfpga.core.ops.FractionOps`); the tests hold all of them equal.
 """
 
 from __future__ import annotations
@@ -14,10 +14,10 @@ from types import MappingProxyType
 
 import numpy as np
 
-from kfpga.ads8364 import CODE_FORMAT
-from kfpga.compiled import compile_stage
-from kfpga.config import FilterConfig
-from kfpga.ops import FractionOps, IntOps
+from kfpga.core.ads8364 import CODE_FORMAT
+from kfpga.core.compiled import compile_stage
+from kfpga.core.config import FilterConfig
+from kfpga.core.ops import FractionOps, IntOps
 
 __all__ = ["FixedModel", "ModelState", "ModelResult"]
 
@@ -67,7 +67,7 @@ class FixedModel:
     Parameters
     ----------
     config:
-        The :class:`~kfpga.config.FilterConfig` (default: the paper's filter, default formats).
+        The :class:`~kfpga.core.config.FilterConfig` (default: the paper's filter, default formats).
     variant:
         One of the filter's variants (default: its first).
     """
@@ -88,7 +88,7 @@ class FixedModel:
 
     # -- compiled loops --------------------------------------------------------------------
     def kernel(self, vector=False):
-        """The compiled loop (see :func:`kfpga.compiled.compile_stage`); built on first use."""
+        """The compiled loop (see :func:`kfpga.core.compiled.compile_stage`); built on first use."""
         if vector not in self._kernels:
             self._kernels[vector] = compile_stage(
                 self._v.update, self.config.formats, constants=self.constants, state=self.state,
@@ -179,11 +179,11 @@ class FixedModel:
                            MappingProxyType(site_flags), MappingProxyType(point_flags))
 
     def run_ops(self, y, state=None):
-        """The same as :meth:`run`, through :class:`~kfpga.ops.IntOps` one sample at a time (slow)."""
+        """The same as :meth:`run`, through :class:`~kfpga.core.ops.IntOps` one sample at a time (slow)."""
         return self._step(IntOps, lambda ops, v: v.raw, y, state)
 
     def run_exact(self, y):
-        """The exact-rational spec (:class:`~kfpga.ops.FractionOps`), one channel, from reset.
+        """The exact-rational spec (:class:`~kfpga.core.ops.FractionOps`), one channel, from reset.
 
         Every value is a ``Fraction`` written once into its point's format: no shift, alignment
         or rounding code is shared with :meth:`run`, only the equations. Very slow; for tests.

@@ -10,7 +10,7 @@ import importlib
 
 __all__ = ["FILTERS", "DEFAULT", "get", "names", "specs", "spec_for", "register", "presets", "preset"]
 
-#: ``name -> module`` whose ``SPEC`` is the filter's :class:`~kfpga.spec.FilterSpec`; imported on use.
+#: ``name -> module`` whose ``SPEC`` is the filter's :class:`~kfpga.core.spec.FilterSpec`; imported on use.
 FILTERS = {
     "kalman2": "kfpga.model.kalman2",
     "kalman": "kfpga.model.kalman",
@@ -33,7 +33,7 @@ def register(spec):
 
 
 def get(name):
-    """The :class:`~kfpga.spec.FilterSpec` named ``name``; ``KeyError`` with the known names."""
+    """The :class:`~kfpga.core.spec.FilterSpec` named ``name``; ``KeyError`` with the known names."""
     if name in _loaded:
         return _loaded[name]
     if name not in FILTERS:

@@ -19,7 +19,7 @@ square-root covariance forms. The rules every backend shares live here, in
 * a product by a constant 0, +-1 or +-2**k is no multiplier: a zero, the value, or a shift.
 
 Backends (this module; the Amaranth one is ``hw/arith.py``, the compiled fast path
-``kfpga/compiled.py``):
+``kfpga/core/compiled.py``):
 
 ==================  ==========================================================================
 :class:`IntOps`     the bit-accurate integers, on Python ints or numpy int64 arrays
@@ -40,7 +40,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from kfpga.fixed import INT64_SAFE_BITS, Overflow, QFormat, Rounding, requantize, to_raw
+from kfpga.core.fixed import INT64_SAFE_BITS, Overflow, QFormat, Rounding, requantize, to_raw
 
 __all__ = ["Fx", "Ops", "IntOps", "FloatOps", "WidthOps", "FractionOps", "CostOps", "update_cost", "Intermediate", "divider_shift",
            "quantise_fraction", "quotient_bits", "divide", "root_shift", "square_root"]
@@ -129,7 +129,7 @@ class Ops:
     def constants(self, constants):
         """A variant's constants (``{name: Constant | structural}``) as values of this backend;
         structural entries pass through unchanged."""
-        from kfpga.spec import Constant
+        from kfpga.core.spec import Constant
 
         return {n: self.const(c.value, c.point, n) if isinstance(c, Constant) else c for n, c in constants.items()}
 
@@ -376,8 +376,8 @@ def square_root(raw, shift, limit):
 class IntOps(Ops):
     """The bit-accurate integers: payloads are Python ints (one channel) or int64 arrays (a batch).
 
-    Every write goes through :func:`kfpga.fixed.requantize`; this backend is the plain,
-    unoptimised statement of the integer model (``kfpga/compiled.py`` is its fast form, and
+    Every write goes through :func:`kfpga.core.fixed.requantize`; this backend is the plain,
+    unoptimised statement of the integer model (``kfpga/core/compiled.py`` is its fast form, and
     the tests hold the two equal).
     """
 
@@ -573,7 +573,7 @@ class WidthOps(Ops):
     def _div(self, num, den, shift, fmt, name):
         qbits = quotient_bits(fmt)
         points = num.points | den.points | {name}
-        # |num| << shift is compared with den << quotient_bits (kfpga.ops.divide)
+        # |num| << shift is compared with den << quotient_bits (kfpga.core.ops.divide)
         self._node(num.width + shift + 1, f"|{num.text}| << {shift}", points, "dividend")
         self._node(den.width + qbits, f"{den.text} << {qbits}", points, "comparison")
         return _W(fmt.width, name, frozenset([name])), False
@@ -685,7 +685,7 @@ def update_cost(config, variant):
     ops = CostOps(config.formats)
     k = ops.constants(config.constants(variant))
     state = {name: ops.input(0, point, name) for name, point in spec_variant.state_for(config.params)}
-    from kfpga.ads8364 import CODE_FORMAT
+    from kfpga.core.ads8364 import CODE_FORMAT
 
     inputs = {name: ops.input(0, CODE_FORMAT, name) for name in config.inputs}
     spec_variant.update(ops, k, state, inputs)

@@ -1,13 +1,13 @@
 """The shared configuration: a registered filter, its parameters, the format of every point.
 
-One :class:`FilterConfig` drives the bit-accurate model (``kfpga/fixedmodel.py``) and the RTL
+One :class:`FilterConfig` drives the bit-accurate model (``kfpga/core/fixedmodel.py``) and the RTL
 (the filter's core in ``hw/``). It is built from defaults, a TOML file or keyword arguments,
 and validated at once: a bad value raises :class:`ConfigError` naming the field and the value.
 
 Default formats come from range analysis (``model/ranges.py``) by the rules of
-``kfpga/formats.py``. Every format is then checked: against the analysed range, against the
+``kfpga/core/formats.py``. Every format is then checked: against the analysed range, against the
 18-bit multiplier operand rule, and for the widths of every exact intermediate, which the
-filter's own equations give when run on :class:`~kfpga.ops.WidthOps`.
+filter's own equations give when run on :class:`~kfpga.core.ops.WidthOps`.
 """
 
 from __future__ import annotations
@@ -20,17 +20,17 @@ from types import MappingProxyType
 
 import numpy as np
 
-from kfpga.errors import ConfigError
-from kfpga.fixed import INT64_SAFE_BITS, QFormat, bits_for, to_raw
-from kfpga.formats import MAX_OPERAND_BITS, MULTIPLIER_BITS, PRECISION, STATE_FRAC_BITS, precision_frac_bits
-from kfpga.ops import WidthOps
-from kfpga.spec import Constant
+from kfpga.core.errors import ConfigError
+from kfpga.core.fixed import INT64_SAFE_BITS, QFormat, bits_for, to_raw
+from kfpga.core.formats import MAX_OPERAND_BITS, MULTIPLIER_BITS, PRECISION, STATE_FRAC_BITS, precision_frac_bits
+from kfpga.core.ops import WidthOps
+from kfpga.core.spec import Constant
 
 __all__ = ["ConfigError", "FilterConfig", "default_formats", "analysed_ranges", "MULTIPLIER_BITS", "STATE_FRAC_BITS"]
 
 
 def _registry():
-    from kfpga import registry
+    from kfpga.core import registry
 
     return registry
 
@@ -55,7 +55,7 @@ def analysed_ranges(params, stimulus=None, *, filter=None):
 
 
 def default_formats(params, *, ranges=None, operand_bits=MULTIPLIER_BITS, state_frac=STATE_FRAC_BITS, filter=None):
-    """Formats chosen by range analysis (``kfpga/formats.py``)."""
+    """Formats chosen by range analysis (``kfpga/core/formats.py``)."""
     spec = _registry().spec_for(params, filter)
     ranges = analysed_ranges(params, filter=spec.name) if ranges is None else ranges
     return spec.default_formats(params, ranges, operand_bits=operand_bits, state_frac=state_frac)
@@ -124,7 +124,7 @@ class FilterConfig:
     # -- derived quantities -------------------------------------------------------------
     @property
     def spec(self):
-        """The filter's :class:`~kfpga.spec.FilterSpec`."""
+        """The filter's :class:`~kfpga.core.spec.FilterSpec`."""
         return _registry().get(self.filter)
 
     def ranges(self):
@@ -138,7 +138,7 @@ class FilterConfig:
 
     @property
     def outputs(self):
-        """The output fields (:class:`~kfpga.spec.Output`), in order."""
+        """The output fields (:class:`~kfpga.core.spec.Output`), in order."""
         return self.spec.outputs_for(self.params)
 
     @property
@@ -156,7 +156,7 @@ class FilterConfig:
         return self.point_format(self.output(name).point)
 
     def constants(self, variant):
-        """``{name: (value, point) | structural}`` of ``variant`` (see :class:`~kfpga.spec.Variant`)."""
+        """``{name: (value, point) | structural}`` of ``variant`` (see :class:`~kfpga.core.spec.Variant`)."""
         return self.spec.variants[variant].constants(self.params)
 
     def constant_raw(self, variant):
@@ -167,7 +167,7 @@ class FilterConfig:
 
     def point_format(self, point):
         """The format of ``point``: a point name's in :attr:`formats`, or ``point`` itself when it
-        is a structural :class:`~kfpga.fixed.QFormat` (a flag, not a configurable point)."""
+        is a structural :class:`~kfpga.core.fixed.QFormat` (a flag, not a configurable point)."""
         return point if isinstance(point, QFormat) else self.formats[point]
 
     def reset_state(self, variant):
@@ -204,12 +204,12 @@ class FilterConfig:
                 self._check_widths(variant)
 
     def width_report(self, variant):
-        """What :class:`~kfpga.ops.WidthOps` finds in the update of ``variant``."""
+        """What :class:`~kfpga.core.ops.WidthOps` finds in the update of ``variant``."""
         v = self.spec.variants[variant]
         ops = WidthOps(self.formats)
         k = ops.constants(v.constants(self.params))
         x = {name: ops.input(None, point, name) for name, point in v.state_for(self.params)}
-        from kfpga.ads8364 import CODE_FORMAT
+        from kfpga.core.ads8364 import CODE_FORMAT
 
         u = {name: ops.input(None, CODE_FORMAT, name) for name in self.inputs}
         v.update(ops, k, x, u)
@@ -289,7 +289,7 @@ class FilterConfig:
     @classmethod
     def from_toml(cls, path):
         """Load a config file (see README for the layout)."""
-        from kfpga.paths import read_text
+        from kfpga.core.paths import read_text
 
         text = read_text(path, what="config file")
         try:
@@ -398,7 +398,7 @@ def format_from_toml(name, spec):
 
     Omitted rules keep the defaults (``nearest``, ``saturate``).
     """
-    from kfpga.fixed import Overflow, Rounding
+    from kfpga.core.fixed import Overflow, Rounding
 
     if isinstance(spec, str):
         spec = {"format": spec}

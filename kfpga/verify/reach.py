@@ -1,5 +1,5 @@
 """Equivalence of a mutant whose change lies in the data-independent part of a block, by
-explicit-state reachability (``kfpga/mutate.py``).
+explicit-state reachability (``kfpga/verify/mutate.py``).
 
 A time-varying Kalman core carries two kinds of state. Its estimate depends on the samples;
 its covariance, its gains and its schedule do not: from the fixed reset they follow one
@@ -77,7 +77,7 @@ def netlist_json(gold_il, gate_il, folder):
     mutant's extra cells move on, so they are renamed by their order of creation, the same in
     both designs.
     """
-    from kfpga.formal import yosys
+    from kfpga.verify.formal import yosys
 
     for side, il in (("gold", gold_il), ("gate", gate_il)):
         # a mutation of a memory's initial contents may leave a gate on a constant (inv, cnot):

@@ -1,6 +1,6 @@
 """Trace an update stage once into straight-line Python, then run that as the model's loop.
 
-The direct backend (:class:`kfpga.ops.IntOps`) pays for a function call, a dataclass and a
+The direct backend (:class:`kfpga.core.ops.IntOps`) pays for a function call, a dataclass and a
 dispatch per operation, about 25 us per sample: too slow for a model meant to filter millions of
 samples. :class:`TraceOps` runs the stage function once per config with symbolic values and
 writes each operation as one line of Python source with every shift, rounding constant and
@@ -28,14 +28,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kfpga.fixed import Overflow, Rounding, shift_round
-from kfpga.ops import Fx, Ops, divide, quotient_bits, square_root
+from kfpga.core.fixed import Overflow, Rounding, shift_round
+from kfpga.core.ops import Fx, Ops, divide, quotient_bits, square_root
 
 __all__ = ["TraceOps", "FloatTraceOps", "Kernel", "compile_stage", "compile_float_ranges"]
 
 
 def _addend_source(v, shift, rounding):
-    """:func:`~kfpga.fixed.round_addend` as Python source over the expression ``v`` (ints or
+    """:func:`~kfpga.core.fixed.round_addend` as Python source over the expression ``v`` (ints or
     int64 arrays alike: a comparison gives a bool, or a bool array, that counts as 0 or 1)."""
     half = 1 << (shift - 1)
     return {
@@ -276,7 +276,7 @@ def compile_stage(update, formats, *, constants, state, inputs, outputs, vector)
 class FloatTraceOps(TraceOps):
     """Records a stage as float64 Python source whose writes keep their largest magnitude.
 
-    The float form of :class:`~kfpga.ops.FloatOps` (real constants, no rounding), compiled for
+    The float form of :class:`~kfpga.core.ops.FloatOps` (real constants, no rounding), compiled for
     the range analysis: one row of stimulus at a time, in Python floats, which is about 50
     times faster than stepping numpy arrays of a few rows through the direct backend.
     """

@@ -29,11 +29,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kfpga.analysis import compare, limit_cycles
-from kfpga.config import ConfigError, FilterConfig
-from kfpga.fixed import QFormat
-from kfpga.fixedmodel import FixedModel
-from kfpga.formats import MULTIPLIER_BITS
+from kfpga.core.config import ConfigError, FilterConfig
+from kfpga.core.fixed import QFormat
+from kfpga.core.fixedmodel import FixedModel
+from kfpga.core.formats import MULTIPLIER_BITS
+from kfpga.flows.analysis import compare, limit_cycles
 from kfpga.model.ranges import full_scale_stimulus
 
 __all__ = ["Proposal", "propose", "OBJECTIVES"]

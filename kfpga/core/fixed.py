@@ -6,7 +6,7 @@ A value in format ``Q(i, f)`` is a signed two's-complement integer ``raw`` of ``
 Every quantisation point of the datapath is a :class:`QFormat`: the format plus the rounding
 rule used when fraction bits are dropped and the overflow rule used when the result does not
 fit. :func:`requantize` applies both to exact integers; ``hw/arith.py`` builds the same
-operation in Amaranth and ``kfpga/compiled.py`` writes it into the model's compiled loops, so
+operation in Amaranth and ``kfpga/core/compiled.py`` writes it into the model's compiled loops, so
 the model and the RTL produce identical integers.
 
 The functions accept Python ``int`` (arbitrary precision) or numpy ``int64`` arrays. They are

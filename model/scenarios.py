@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kfpga.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
 
 __all__ = ["SCENARIOS", "sine", "random_accel", "adc_codes", "make", "for_config"]
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from kfpga.fixed import QFormat
+from kfpga.core.fixed import QFormat
 
 __all__ = ["Timing", "TIMING", "CHANNELS", "ADDRESS_CYCLE_MODE", "ADDRESS_FIFO_MODE", "CODE_FORMAT", "CODE_MIN",
            "CODE_MAX", "hold_pair", "figure"]

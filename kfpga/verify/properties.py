@@ -1,5 +1,5 @@
 """Formal properties of the blocks: each a harness around one block, with ``Assert``, ``Assume``
-and ``Cover`` statements, proven by SymbiYosys (``kfpga/formal.py``, ``make formal``).
+and ``Cover`` statements, proven by SymbiYosys (``kfpga/verify/formal.py``, ``make formal``).
 
 A harness drives every input of its block from a top-level port, so the solver chooses them
 freely in every cycle; ``Assume`` narrows them to what the block may expect (the stream

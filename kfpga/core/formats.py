@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 
-from kfpga.fixed import QFormat, Rounding, bits_for, to_raw
+from kfpga.core.fixed import QFormat, Rounding, bits_for, to_raw
 
 __all__ = ["MULTIPLIER_BITS", "MAX_OPERAND_BITS", "STATE_FRAC_BITS", "GUARD_BITS", "PRECISION", "register_formats",
            "precision_frac_bits", "precision_needs", "noise_frac_bits", "noise_step_frac"]
@@ -63,7 +63,7 @@ def noise_frac_bits(variance):
 def precision_needs(spec, params):
     """``{point: fraction bits}`` the nonzero constants and reset values of the variants that
     apply to ``params`` need (:func:`precision_frac_bits`)."""
-    from kfpga.spec import Constant
+    from kfpga.core.spec import Constant
 
     needs = {}
     for variant in spec.variants.values():

@@ -4,7 +4,7 @@
 radar pixel coordinates with white noise, tracked by the alpha-beta filter (float and
 bit-accurate), the moving mean and the Kalman filter; RMSE of position and velocity; the
 additions and multiplications per update (the paper's table 1), counted by running each
-filter's update on :class:`~kfpga.ops.CostOps`.
+filter's update on :class:`~kfpga.core.ops.CostOps`.
 """
 
 from __future__ import annotations
@@ -80,11 +80,11 @@ def _rmse(est_x, est_v, truth, vel, settle):
 def alpha_beta(scenario=None, *, seed):
     """Run the evaluation; a dict of the scenario, the RMSE rows, the operation counts and the
     series the plot draws."""
-    from kfpga.config import FilterConfig
-    from kfpga.fixedmodel import FixedModel, ModelState
+    from kfpga.core.config import FilterConfig
+    from kfpga.core.fixedmodel import FixedModel, ModelState
+    from kfpga.core.ops import update_cost
     from kfpga.model import alphabeta as ab
     from kfpga.model.reference import KalmanParams, kalman_decomposed
-    from kfpga.ops import update_cost
 
     s = AlphaBetaScenario() if scenario is None else scenario
     rng = np.random.default_rng(seed)
@@ -191,7 +191,7 @@ def alpha_beta_findings(result):
 
 def alpha_beta_plot(result, path):
     """The paper's figures: the tracks (truth, plots, filtered), and the position error against time."""
-    from kfpga.analysis import pyplot
+    from kfpga.flows.analysis import pyplot
 
     plt = pyplot()
 
@@ -336,8 +336,8 @@ def _outlier_metrics(out, raw, measured, truth, threshold, lsb, decided=None):
 
 def tukey53h(scenario=None, *, seed):
     """Run the 53H evaluation: ``{seed, scenario, rows, limits, series}`` (see :func:`tukey53h_table`)."""
-    from kfpga.config import FilterConfig
-    from kfpga.fixedmodel import FixedModel
+    from kfpga.core.config import FilterConfig
+    from kfpga.core.fixedmodel import FixedModel
     from kfpga.model import tukey53h as th
 
     s = NavigationScenario() if scenario is None else scenario
@@ -376,8 +376,8 @@ def tukey53h(scenario=None, *, seed):
 
 def _limits(s, signal, seed):
     """What 53H removes by burst length, size and density (east velocity): removed %, false replacements."""
-    from kfpga.config import FilterConfig
-    from kfpga.fixedmodel import FixedModel
+    from kfpga.core.config import FilterConfig
+    from kfpga.core.fixedmodel import FixedModel
     from kfpga.model import tukey53h as th
 
     truth, measured, threshold, lsb, _ = signal
@@ -395,9 +395,9 @@ def _limits(s, signal, seed):
 
 def _comparators():
     """Comparators and other operations per sample of the online 53H, counted on its update."""
-    from kfpga.config import FilterConfig
+    from kfpga.core.config import FilterConfig
+    from kfpga.core.ops import CostOps, update_cost
     from kfpga.model import tukey53h as th
-    from kfpga.ops import CostOps, update_cost
 
     ops = CostOps({})
     values = [ops.input(0, th.FLAG) for _ in range(5)]
@@ -478,7 +478,7 @@ def tukey53h_findings(result):
 
 def tukey53h_plot(result, path):
     """The paper's figs. 5-6: east and north velocity before and after each method."""
-    from kfpga.analysis import pyplot
+    from kfpga.flows.analysis import pyplot
 
     plt = pyplot()
 
@@ -549,7 +549,7 @@ def roll(*, seed, samples=480, series=None, params=None):
             sweep.append({"data": data, "s": s, "rmse_deg": rp.prediction_rmse(z, p)[0]})
     # the bit-accurate predictor (the core's integers, default formats) against float from the
     # same start, and both forms over word lengths on the longer series
-    from kfpga.config import FilterConfig
+    from kfpga.core.config import FilterConfig
 
     config = FilterConfig(filter="roll", params=params)
     fixed = []
@@ -687,7 +687,7 @@ def _fading_finding(result):
 
 def roll_plot(result, path):
     """The paper's figs. 4-5: the roll and its predictions, and the prediction errors."""
-    from kfpga.analysis import pyplot
+    from kfpga.flows.analysis import pyplot
 
     plt = pyplot()
 
@@ -816,10 +816,10 @@ def ls_frontend_fixed(v, params):
     """The front end in the core's integers on the speed log ``v`` (m/s, ADC codes of
     ``params.lsb``) and the same switched steady-state filter in float: both estimates (m/s),
     their distance, the formats, the overflowed samples and the samples whose window differs."""
-    from kfpga.config import FilterConfig
-    from kfpga.fixedmodel import FixedModel
+    from kfpga.core.config import FilterConfig
+    from kfpga.core.fixedmodel import FixedModel
     from kfpga.model import lsfront as ls
-    from kfpga.scenarios import adc_codes
+    from kfpga.model.scenarios import adc_codes
 
     config = FilterConfig(filter="ls-frontend", params=params)
     codes = adc_codes(np.asarray(v) / params.lsb)
@@ -908,7 +908,7 @@ def ls_frontend_findings(result):
 
 def ls_frontend_plot(result, path):
     """The patent's fig. 4: the velocity estimates through the deceleration, and their errors."""
-    from kfpga.analysis import pyplot
+    from kfpga.flows.analysis import pyplot
 
     plt = pyplot()
 

@@ -13,14 +13,14 @@ from pathlib import Path
 from string import Template
 
 from kfpga import __version__
-from kfpga.ads8364 import CHANNELS, figure
-from kfpga.board import SYSTEM_MHZ, SYSTEM_PERIOD_NS
-from kfpga.errors import InputError, PinError
+from kfpga.core.ads8364 import CHANNELS, figure
+from kfpga.core.board import SYSTEM_MHZ, SYSTEM_PERIOD_NS
+from kfpga.core.errors import InputError, PinError
+from kfpga.core.paths import read_text
+from kfpga.core.spec import Constant
 from kfpga.hw.generate import TOP_NAME, write_top
 from kfpga.hw.top import PORTS, out_width
 from kfpga.hw.top import out_field as top_out_field
-from kfpga.paths import read_text
-from kfpga.spec import Constant
 
 __all__ = ["FAMILY", "DEVICE", "DEVICE_ORDERING", "PinError", "PinRow", "load_pins", "port_bits", "check_pins", "io_timing",
            "write_project"]

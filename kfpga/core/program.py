@@ -5,13 +5,13 @@ datapath that does it in one clock: what it needs is few logic cells. The sequen
 the update one operation at a time on one adder, one multiplier, one divider and one square
 root, with every value in block memory. Its program is the update itself: the variant's stage
 functions run once on :class:`ProgramOps`, which records each primitive operation of the
-operations layer (``kfpga/ops.py``) with its operands, in the order the model computes them.
+operations layer (``kfpga/core/ops.py``) with its operands, in the order the model computes them.
 The core executes exactly those operations, each with the same rounding and overflow rule as
 the model, so it computes the model's integers by construction (and the tests check it).
 
 What is decided here, once per config:
 
-* the values: every operation's exact width (Amaranth's rules, as :class:`~kfpga.ops.WidthOps`),
+* the values: every operation's exact width (Amaranth's rules, as :class:`~kfpga.core.ops.WidthOps`),
   and so the width of the core's words and of its multiplier, divider and square root;
 * the registers: constants and reset states at fixed addresses, the samples of one update at
   fixed addresses, every intermediate in a register that is free again after its last use
@@ -27,9 +27,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from kfpga.ads8364 import CODE_FORMAT
-from kfpga.fixed import Overflow, Rounding
-from kfpga.ops import Fx, Ops, quotient_bits
+from kfpga.core.ads8364 import CODE_FORMAT
+from kfpga.core.fixed import Overflow, Rounding
+from kfpga.core.ops import Fx, Ops, quotient_bits
 
 __all__ = ["Instruction", "Program", "ProgramOps", "build_program", "OPS", "ROUNDINGS"]
 
@@ -331,9 +331,9 @@ def execute(program, samples, channels):
     """The core's semantics in Python: run ``program`` on ``samples`` (``[{input: code}]``) of
     ``channels`` (a channel number per sample), from the power-up register file. Returns
     ``([{output: raw}], [overflow])``, one per sample. Each operation is the model's own
-    integer function (``kfpga/ops.py``, ``kfpga/fixed.py``) on the values it reads."""
-    from kfpga.fixed import QFormat, requantize
-    from kfpga.ops import divide, square_root
+    integer function (``kfpga/core/ops.py``, ``kfpga/core/fixed.py``) on the values it reads."""
+    from kfpga.core.fixed import QFormat, requantize
+    from kfpga.core.ops import divide, square_root
 
     mask, sign = (1 << program.width) - 1, 1 << (program.width - 1)
     regs = [(v & mask) - ((v & sign) << 1) for v in program.init]

@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from kfpga.errors import InputError, UsageError
+from kfpga.core.errors import InputError, UsageError
 
 __all__ = ["read_text", "check_output_file", "check_output_dir"]
 

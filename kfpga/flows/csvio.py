@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from kfpga.ads8364 import CODE_MAX, CODE_MIN
-from kfpga.errors import InputError
-from kfpga.paths import read_text
+from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.core.errors import InputError
+from kfpga.core.paths import read_text
 
 __all__ = ["InputError", "Samples", "read_samples", "read_header", "write_columns", "read_series"]
 

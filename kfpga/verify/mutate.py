@@ -6,7 +6,7 @@ another wire). Each mutant is then run against two killers in turn:
 
 1. the block's tests: its cocotb bench on the mutant's Verilog (Icarus), which checks every
    output against the bit-accurate model and every ADS8364 timing rule;
-2. if it survives those, the block's formal properties (``hw/properties.py``) on the same
+2. if it survives those, the block's formal properties (``kfpga/verify/properties.py``) on the same
    mutation of the property harness's copy of the block (SymbiYosys).
 
 A mutant both miss is checked for equivalence with the original block (memories mapped to
@@ -15,13 +15,13 @@ written, with constants folded, and, for a one-channel core, with the channel fi
 (its input contract: it takes channel numbers below its channel count), each with unused
 names purged and with every name kept; then, for a change in
 the logic that does not depend on the samples, an explicit-state search of that logic
-(``kfpga/reach.py``); then a miter of the two, proven equal by k-induction with SymbiYosys or,
+(``kfpga/verify/reach.py``); then a miter of the two, proven equal by k-induction with SymbiYosys or,
 for a miter of at most 11 register bits, by a bounded check from power-up as deep as it has
 states (complete: every reachable state lies on a path that repeats none). A proof makes it
 *equivalent* (no test could see it); otherwise it *survived*.
 The score is killed / (mutants - equivalent), per block.
 
-    python -m kfpga.mutate [--mutants N] [--seed S] [--only BLOCK] [--json]
+    python -m kfpga.verify.mutate [--mutants N] [--seed S] [--only BLOCK] [--json]
 """
 
 from __future__ import annotations
@@ -38,8 +38,8 @@ from pathlib import Path
 
 from amaranth.back import rtlil
 
-from kfpga.formal import divider_widths, warm
 from kfpga.hw.generate import figures_only, plain_module_names
+from kfpga.verify.formal import divider_widths, warm
 
 __all__ = ["Block", "blocks", "main"]
 
@@ -60,8 +60,8 @@ class Block:
     bench: str = ""
     params: dict = field(default_factory=dict)
     testcase: str | list | None = None
-    formal: str | None = None  # the block's label in kfpga.formal.jobs(), whose harness holds it as top.dut
-    data: dict | None = None  # {port: [bit, ...]}: the input bits that carry samples (kfpga/reach.py)
+    formal: str | None = None  # the block's label in kfpga.verify.formal.jobs(), whose harness holds it as top.dut
+    data: dict | None = None  # {port: [bit, ...]}: the input bits that carry samples (kfpga/verify/reach.py)
     tied: dict | None = None  # {port: [bit, ...]}: input bits that the block's input contract holds at 0
 
     @property
@@ -72,8 +72,8 @@ class Block:
 def blocks():
     import numpy as np
 
-    from kfpga.config import FilterConfig
-    from kfpga.fixed import QFormat
+    from kfpga.core.config import FilterConfig
+    from kfpga.core.fixed import QFormat
     from kfpga.hw.clockdiv import ClockDivider
     from kfpga.hw.divider import Divider
     from kfpga.hw.generate import TOP_NAME
@@ -180,7 +180,7 @@ def _port_width(il_path, wire):
 
 
 def _yosys(script, cwd, timeout=None):
-    from kfpga.formal import yosys
+    from kfpga.verify.formal import yosys
 
     return yosys(script, cwd, timeout)
 
@@ -223,7 +223,7 @@ EQUIVALENCE_TIMEOUT_S = 900
 def _sby(folder, il_name, mode, depth, top="top"):
     """Prove the assertions of ``il_name`` (``mode`` prove or bmc, to ``depth``); the status word
     (ERROR after :data:`EQUIVALENCE_TIMEOUT_S`)."""
-    from kfpga.formal import PREP, sby, status
+    from kfpga.verify.formal import PREP, sby, status
 
     (folder / "check.sby").write_text(f"[options]\nmode {mode}\ndepth {depth}\nmulticlock off\n\n"
                                       f"[engines]\nsmtbmc yices\n\n[script]\nread_rtlil {il_name}\n"
@@ -238,7 +238,7 @@ def run_block(block, count, seed, progress):
     shutil.rmtree(folder, ignore_errors=True)
     folder.mkdir(parents=True)
     (folder / "design.il").write_text(rtlil.convert(block.make(), name=block.toplevel))
-    from kfpga import formal
+    from kfpga.verify import formal
 
     checks = [j for j in formal.jobs() if j.block == block.formal]
     ok, log = _yosys(f"read_rtlil design.il\nmutate -list {count} -seed {seed} -o mutations.ys {block.target}\n", folder)
@@ -282,7 +282,7 @@ def run_block(block, count, seed, progress):
 def _formal_kills(block, line, mdir, checks):
     """The first of the block's properties that the mutant breaks (a counterexample, or a cover
     it makes unreachable), or ``None``."""
-    from kfpga.formal import run_job
+    from kfpga.verify.formal import run_job
 
     mutated = line.replace(f"-module {block.target} ", "-module top.dut ")
     for job in checks:
@@ -321,7 +321,7 @@ def _equivalence(block, line, mdir, folder):
     if not _changes_memory_contents(line, folder) and (told := _matched_equivalence(block, mdir)) is not None:
         return {"result": "equivalent", "by": f"Yosys equiv_induct (registers matched{told})"}
     # a change in the logic that does not depend on the samples (a time-varying core's covariance
-    # and gains): every reachable state of that logic, searched (kfpga/reach.py)
+    # and gains): every reachable state of that logic, searched (kfpga/verify/reach.py)
     verdict = _data_independent(block, line, mdir) if block.data else None
     if verdict is not None and verdict.equivalent:
         return {"result": "equivalent", "by": f"explicit-state search of the data-independent logic: {verdict.why}"}
@@ -381,7 +381,7 @@ def _changes_memory_contents(line, folder):
 
 
 def _data_independent(block, line, mdir):
-    """:func:`kfpga.reach.check` of the mutant against the original (``None`` when the netlists
+    """:func:`kfpga.verify.reach.check` of the mutant against the original (``None`` when the netlists
     cannot be read).
 
     The mutation is made on the flattened original, so that every other cell keeps its name;
@@ -389,7 +389,7 @@ def _data_independent(block, line, mdir):
     folds to constants, such as a multiplexer of constants), both are flattened again from the
     block's RTLIL without that folding (``proc -noopt``), the mutation made before, and their
     generated names are matched by their order of creation."""
-    from kfpga import reach
+    from kfpga.verify import reach
 
     mutation = line.replace(f"-module {block.target} ", "-module gate ")
     ok, _ = _yosys(f"read_rtlil gold.il\nrename gold gate\n{mutation}\nwrite_rtlil gate_reach.il\n", mdir)
@@ -422,7 +422,7 @@ COMPLETE_BMC_BITS = 11
 
 def _state_bits(folder, il_name, top):
     """Register bits of ``top`` in ``il_name`` after the checks' preparation, or ``None``."""
-    from kfpga.formal import PREP
+    from kfpga.verify.formal import PREP
 
     ok, _ = _yosys(f"read_rtlil {il_name}\n{PREP.format(top=top)}flatten\nwrite_json state.json\n", folder)
     if not ok:
@@ -461,7 +461,7 @@ def table(summary_rows):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(
-        prog="python -m kfpga.mutate",
+        prog="python -m kfpga.verify.mutate",
         description="Mutation testing of the hardware blocks: Yosys mutants of each block, killed by its cocotb "
                     "bench (Icarus) or its formal properties, survivors checked for equivalence with SymbiYosys. "
                     "Writes build/mutate/report.json and prints the score per block (goal: >= 95 %).")
@@ -472,7 +472,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if args.mutants < 1:
         parser.exit(2, f"{parser.prog}: error: --mutants must be >= 1, not {args.mutants}\n")
-    from kfpga.tools import simulator_available
+    from kfpga.core.tools import simulator_available
 
     ok, why = simulator_available("icarus")
     if not ok:
