@@ -1,10 +1,10 @@
 """The alpha-beta tracker's cores (seeds/004): one pipelined loop shared by many tracks.
 
-The update is the model's own (``model/alphabeta.py``), through the steps of the steady-state
-Kalman core (``hw/kalman2.py``): the two filters have one loop, xp = x + T v, e = z - xp,
-x = xp + alpha e, T v = T v + beta e, and differ only in their gains and names.
+The update is the model's own (``model/alphabeta.py``), through the steps of the constant-velocity
+loop (``hw/cvloop.py``), which the paper's steady-state filter runs too: xp = x + T v, e = z - xp,
+x = xp + alpha e, T v = T v + beta e; the two differ only in their gains and names.
 
-* :class:`AlphaBetaCore`: the loop over L register stages with ``channels`` independent
+* :class:`SteadyCore`: the loop over L register stages with ``channels`` independent
   states, each one axis of one track (:class:`~kfpga.hw.core.LoopPipeline`). Up to 8 states
   live in registers; more (up to 512: 256 tracks of two axes) live in M4K block memory.
 * :class:`TrackerCore`: the many-track interface around it. Its input stream carries
@@ -19,14 +19,12 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from kfpga.core.ads8364 import CODE_FORMAT
-from kfpga.hw.kalman2 import CUTS, SteadyKalman, steady_correct, steady_predict, steady_products
+from kfpga.hw.cvloop import CUTS, ConstantGainLoop, steady_correct, steady_predict, steady_products
 from kfpga.hw.storage import check_channels, m4k_blocks
-from kfpga.model import kalman2 as eq
+from kfpga.model import cvloop as eq
+from kfpga.model.alphabeta import MAX_TRACKS
 
-__all__ = ["AlphaBetaCore", "TrackerCore", "make_core", "MAX_TRACKS", "tracker_m4k_blocks"]
-
-#: Tracks one core can hold (two states each, one per axis).
-MAX_TRACKS = 256
+__all__ = ["SteadyCore", "TrackerCore", "make_core", "tracker_m4k_blocks"]
 
 
 def _innovation(ops, k, v):
@@ -34,8 +32,8 @@ def _innovation(ops, k, v):
     return v
 
 
-class AlphaBetaCore(SteadyKalman):
-    """The alpha-beta loop, ``channels`` states (1..512) interleaved; see :class:`SteadyKalman`
+class SteadyCore(ConstantGainLoop):
+    """The alpha-beta loop, ``channels`` states (1..512) interleaved; see :class:`~kfpga.hw.cvloop.ConstantGainLoop`
     for the pipeline and the stream contract, and :class:`~kfpga.hw.core.LoopPipeline` for the
     block-memory states past 8 (a state repeated back to back stalls; nothing is forwarded)."""
 
@@ -68,7 +66,7 @@ def _track_bits(tracks):
 
 
 class TrackerCore(wiring.Component):
-    """``tracks`` independent 2-D tracks through one :class:`AlphaBetaCore` (``2 * tracks`` states).
+    """``tracks`` independent 2-D tracks through one :class:`SteadyCore` (``2 * tracks`` states).
 
     One measurement per clock across tracks, in any order of track ids; the same track and axis
     again before its previous update has written back waits (L cycles in registers, L + 1 in
@@ -89,7 +87,7 @@ class TrackerCore(wiring.Component):
         self.tracks = tracks
         # the state number 2 track + axis, as wide as the track field allows (an id past the last
         # track must not alias a valid state)
-        self.core = AlphaBetaCore(config, channels=2 * tracks, stages=stages, index_bits=_track_bits(tracks) + 1)
+        self.core = SteadyCore(config, channels=2 * tracks, stages=stages, index_bits=_track_bits(tracks) + 1)
         f = config.formats
         bits = _track_bits(tracks)
         super().__init__({
@@ -136,4 +134,4 @@ def make_core(config, variant, *, channels=1, stages=None):
     """The alpha-beta loop with ``channels`` states (the registry's core; ``stages`` default 4)."""
     if variant != "steady":
         raise ValueError(f"variant must be 'steady' (the alpha-beta tracker has constant gains), not {variant!r}")
-    return AlphaBetaCore(config, channels=channels, stages=4 if stages is None else stages)
+    return SteadyCore(config, channels=channels, stages=4 if stages is None else stages)

@@ -105,7 +105,7 @@ class SteadyCore(LoopPipeline):
     x = [that + K_i2 e_2]. One
     channel takes a sample every L cycles, C >= L channels in turn one per clock. The default
     L is :func:`default_stages`. Parameters and members as
-    :class:`~kfpga.hw.kalman2.SteadyKalman`; the input word has one field per observation.
+    :class:`~kfpga.hw.cvloop.ConstantGainLoop`; the input word has one field per observation.
     """
 
     steps = (_predict_sums, _predict_round, _observe, _products, _correct)

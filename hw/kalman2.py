@@ -14,115 +14,28 @@ ADC controller only produces valid ones.
 
 from __future__ import annotations
 
-from types import MappingProxyType
-from typing import ClassVar
-
 from amaranth import Cat, Module, Mux, Signal, signed
 
 from kfpga.core.ads8364 import CODE_FORMAT
 from kfpga.core.ops import Fx, divider_shift, quotient_bits
 from kfpga.hw.arith import NO_OVERFLOW, any_flag, live_flags
-from kfpga.hw.core import Core, LoopPipeline, write_estimate
+from kfpga.hw.core import Core, write_estimate
+from kfpga.hw.cvloop import ConstantGainLoop
 from kfpga.hw.divider import Divider
 from kfpga.hw.storage import at, select
+from kfpga.model import cvloop
 from kfpga.model import kalman2 as eq
 
-__all__ = ["SteadyKalman", "FullKalman", "make_core", "STEADY_STEPS", "CUTS", "steady_predict", "steady_innovation",
-           "steady_products", "steady_correct"]
+__all__ = ["SteadyCore", "FullCore", "make_core"]
 
 
-def steady_predict(ops, k, v):
-    v["xl1"] = eq.predict(ops, v["x1"], v["v"])                         # xl1 = x1 + v
-    return v
+class SteadyCore(ConstantGainLoop):
+    """The paper's steady-state (constant-gain) core: the constant-velocity loop
+    (:class:`~kfpga.hw.cvloop.ConstantGainLoop`) with the gains ``K1`` and ``T*K2``; see there for
+    the pipeline and the stream contract."""
 
 
-def steady_innovation(ops, k, v):
-    v["e"] = eq.innovation(ops, v["y"], v["xl1"])                       # e = y - xl1
-    return v
-
-
-def steady_products(ops, k, v):
-    v["k1e"], v["k2e"] = ops.mul(k["k1"], v["e"]), ops.mul(k["k2"], v["e"])  # K1 e, T K2 e
-    return v
-
-
-def steady_correct(ops, k, v):
-    v["x1_next"] = eq.correct(ops, v["xl1"], v["k1e"], "x1")             # x1 = xl1 + K1 e
-    v["v_next"] = eq.correct(ops, v["v"], v["k2e"], "v")                 # v = v + T K2 e
-    return v
-
-
-#: The steady-state update as four steps of about one carry chain (or one multiplier) each;
-#: ``CUTS[L]`` lists the steps a pipeline of L stages registers after (SteadyKalman).
-STEADY_STEPS = (steady_predict, steady_innovation, steady_products, steady_correct)
-#: What each step reads: a value no later step reads is not registered.
-STEADY_READS = ({"x1", "v"}, {"y", "xl1"}, {"e"}, {"xl1", "v", "k1e", "k2e"})
-CUTS = {1: (), 2: (2,), 3: (1, 3), 4: (1, 2, 3)}
-
-
-class SteadyKalman(LoopPipeline):
-    """Steady-state (constant-gain) Kalman core: the loop x -> xl1 -> e -> K e -> x over
-    ``stages`` register stages, channels interleaved (:class:`~kfpga.hw.core.LoopPipeline`).
-
-    The update is the model's own (``model/kalman2.py``), split into four steps: xl1 = x1 + v;
-    e = y - xl1; the products K1 e, T K2 e; x1 = xl1 + K1 e and v = v + T K2 e. A pipeline of
-    L stages registers between them (:data:`CUTS`): L = 4 puts one carry chain, or one
-    multiplier, between two registers. One channel: one sample every L cycles; C >= L channels
-    in turn (the six ADS8364 channels): one sample per clock across them. Any order works; a
-    channel repeated within L samples waits.
-
-    The rate output x2 = v / T is a free shift when T = 2**k; otherwise it takes four more
-    steps after the loop (the new v registered, rounded into the 18-bit operand vt, multiplied
-    by 1/T, rounded into x2), which add latency, not cycles per update.
-
-    Parameters
-    ----------
-    config:
-        The shared :class:`~kfpga.core.config.FilterConfig` (the ``kalman2`` filter).
-    channels:
-        Independent channel states (1..8).
-    stages:
-        L, the register stages of the loop (1..4; default 4, the one that meets 50 MHz on the
-        -8 part with margin: see ``kfpga resources``).
-
-    Members
-    -------
-    i : In(stream.Signature(input_layout(config, channels)))
-        Samples.
-    o : Out(stream.Signature(output_layout(config, channels)))
-        Estimates, one per sample.
-    overflow : Out(1)
-        Sticky: some write saturated (or wrapped) since reset.
-    """
-
-    steps = STEADY_STEPS
-    reads = STEADY_READS
-    cuts = CUTS
-    writes: ClassVar[dict] = MappingProxyType({"x1": "x1_next", "v": "v_next"})
-
-    #: The output field that carries the rate v / T (the steps below write it).
-    rate_output = "x2"
-
-    def __init__(self, config, *, channels=1, stages=4, index_bits=None):
-        super().__init__(config, "steady", channels=channels, stages=stages, index_bits=index_bits)
-
-    def outputs(self, live):
-        return {"x1": live["x1_next"], "yhat": live["xl1"], "x2": live["v_next"]}
-
-    def output_steps(self):
-        name = self.rate_output
-
-        def on_rate(step):
-            return lambda ops, k, out: {**out, name: step(ops, k, out[name])}
-
-        if self.constants["t_shift"] is not None:
-            return [on_rate(eq.rate)]
-        # the loop's result registered first: each step then has a cycle to itself
-        return [on_rate(lambda ops, k, v: v), on_rate(eq.rate_operand), on_rate(eq.rate_product),
-                on_rate(eq.rate_write)]
-
-
-class FullKalman(Core):
+class FullCore(Core):
     """Time-varying Kalman core: the decomposed equations with two restoring dividers.
 
     Schedule per update (one channel at a time), at most one carry chain or one multiplier
@@ -144,7 +57,7 @@ class FullKalman(Core):
     the estimate is on ``o`` in cycle ``c + cycles_per_update``, and the next input can be
     accepted in that same cycle. If ``o`` is still full, the last state waits.
 
-    Parameters and members as :class:`SteadyKalman` (without ``stages``).
+    Parameters and members as :class:`SteadyCore` (without ``stages``).
     """
 
     def __init__(self, config, *, channels=1):
@@ -186,7 +99,7 @@ class FullKalman(Core):
         tu1 = self.arith(m, prefix="tu1_")
         k = tu1.constants(self.constants)
         x = {n: tu1.input(work[n], points[n], n) for n in names}
-        xl1 = eq.predict(tu1, x["x1"], x["v"])                                        # xl1 = x1 + v
+        xl1 = cvloop.predict(tu1, x["x1"], x["v"])                                        # xl1 = x1 + v
         pl = eq.covariance_predict(tu1, k, x["p11"], x["p12"], x["p21"], x["p22"])   # P' = Phi P Phi^T + Q'
         held1 = [tu1.hold(v, n) for v, n in zip((xl1, *pl), ("xl1", "pl11", "pl12", "pl21", "pl22"), strict=True)]
         xl1_r, pl11_r, pl12_r, pl21_r, pl22_r = (h for h, _ in held1)
@@ -194,7 +107,7 @@ class FullKalman(Core):
         # -- TU2: S, the innovation, the dividends ----------------------------------------------
         tu2 = self.arith(m, prefix="tu2_")
         s = eq.innovation_variance(tu2, k, pl11_r)                                    # S = pl11 + R
-        e = eq.innovation(tu2, tu2.input(sample, CODE_FORMAT, "y"), xl1_r)            # e = y - xl1
+        e = cvloop.innovation(tu2, tu2.input(sample, CODE_FORMAT, "y"), xl1_r)            # e = y - xl1
         e_r, e_assign = tu2.hold(e, "e")
 
         def dividend(pl_value):  # |pl| << shift: the divider works on magnitudes
@@ -224,8 +137,8 @@ class FullKalman(Core):
                                                    strict=True)]
         k1e_r, k2e_r, *pk_r = (p for p, _ in products)
         wb = self.arith(m, prefix="wb_")
-        x1_n = eq.correct(wb, xl1_r, k1e_r, "x1")                                     # x1 = xl1 + K1 e
-        v_n = eq.correct(wb, x["v"], k2e_r, "v")                                      # v = v + K2 e
+        x1_n = cvloop.correct(wb, xl1_r, k1e_r, "x1")                                     # x1 = xl1 + K1 e
+        v_n = cvloop.correct(wb, x["v"], k2e_r, "v")                                      # v = v + K2 e
         p_n = eq.covariance_correct(wb, (pl11_r, pl12_r, pl21_r, pl22_r), pk_r)       # P = P' - K C P'
         next_state = dict(zip(names, (x1_n, v_n, *p_n), strict=True))
         # the flags of WB are registered one by one and ORed in the next cycle: an OR tree
@@ -240,13 +153,13 @@ class FullKalman(Core):
         v_done_fx = Fx(v_done, f["v"].frac_bits, None, f["v"], "v")
         rate_ops = [self.arith(m, prefix=f"x{n}_") for n in range(1, 4)]
         if self.rate_steps:
-            operand, op_assign = rate_ops[0].hold(eq.rate_operand(rate_ops[0], k, v_done_fx), "vt")
-            product, pr_assign = rate_ops[1].hold(eq.rate_product(rate_ops[1], k, operand), "vt_inv_t")
-            x2_n = eq.rate_write(rate_ops[2], k, product)
+            operand, op_assign = rate_ops[0].hold(cvloop.rate_operand(rate_ops[0], k, v_done_fx), "vt")
+            product, pr_assign = rate_ops[1].hold(cvloop.rate_product(rate_ops[1], k, operand), "vt_inv_t")
+            x2_n = cvloop.rate_write(rate_ops[2], k, product)
             rate_flags = [rate_ops[0].overflow(), NO_OVERFLOW, rate_ops[2].overflow()]
             out_flags = [flags, rate_flags[2]]
         else:
-            x2_n = eq.rate(rate_ops[0], k, v_done_fx)
+            x2_n = cvloop.rate(rate_ops[0], k, v_done_fx)
             rate_flags = [rate_ops[0].overflow()]
             out_flags = [flags, wb_any, rate_flags[0]]
 
@@ -321,9 +234,9 @@ def make_core(config, variant, *, channels=1, stages=None):
     """The core of ``variant`` ("steady" or "full"), each with the stages that meet 50 MHz;
     ``stages``: L of the steady loop (default 4), which the time-varying core does not have."""
     if variant == "steady":
-        return SteadyKalman(config, channels=channels, stages=4 if stages is None else stages)
+        return SteadyCore(config, channels=channels, stages=4 if stages is None else stages)
     if variant == "full":
         if stages is not None:
             raise ValueError("stages applies to the steady variant's loop; the time-varying core has a fixed schedule")
-        return FullKalman(config, channels=channels)
+        return FullCore(config, channels=channels)
     raise ValueError(f"variant must be 'steady' or 'full', not {variant!r}")

@@ -1,4 +1,4 @@
-"""Top level: clock divider + ADS8364 controller (+ a 53H pre-filter) + a registered filter's core + output port."""
+"""Top level: clock divider + ADS8364 controller (+ a pre-filter) + a registered filter's core + output port."""
 
 from typing import NamedTuple
 
@@ -7,10 +7,11 @@ from amaranth.lib import stream, wiring
 from amaranth.lib.cdc import ResetSynchronizer
 from amaranth.lib.wiring import In, Out
 
+from kfpga.core import registry
 from kfpga.hw.ads8364 import ADS8364Controller, SampleLayout
 from kfpga.hw.clockdiv import ClockDivider
 
-__all__ = ["FilterSystem", "AdcFrontend", "PORTS", "ADC_PINS", "out_field", "PREFILTERS", "prefilter_core"]
+__all__ = ["FilterSystem", "AdcFrontend", "PORTS", "ADC_PINS", "out_field", "prefilters", "prefilter_core"]
 
 #: Top-level ports: name -> (direction, width, description). The pin table and the .sdc use it.
 PORTS = {
@@ -110,17 +111,19 @@ class _Words(NamedTuple):
     sample: object
 
 
-#: Filters that can sit between the controller and the core.
-PREFILTERS = ("53h",)
+def prefilters():
+    """The registered filters that can sit between the controller and the core (a spec with a
+    ``prefilter``)."""
+    return [spec.name for spec in registry.specs() if spec.prefilter is not None]
 
 
 def prefilter_core(config, channels):
-    """The core of a pre-filter config (a 53H smoother) for ``channels`` ADC channels, checked:
-    its formats must not be able to overflow (its words reach the core unflagged)."""
+    """The core of a pre-filter config for ``channels`` ADC channels, checked: its formats must not
+    be able to overflow (its words reach the core unflagged)."""
     from kfpga.core.fixedmodel import FixedModel
 
-    if config.filter not in PREFILTERS:
-        raise ValueError(f"the pre-filter must be one of {', '.join(PREFILTERS)}, not {config.filter}")
+    if config.spec.prefilter is None:
+        raise ValueError(f"the pre-filter must be one of {', '.join(prefilters())}, not {config.filter}")
     sites = FixedModel(config).kernel(False).sites
     if sites:
         raise ValueError(f"the pre-filter's formats can overflow (at {', '.join(sites)}); its output goes to the core "
@@ -165,10 +168,11 @@ class FilterSystem(wiring.Component):
     out_field:
         The output field on ``out_data`` (default: the filter's, ``x1`` for the paper's).
     prefilter:
-        ``None``, or the :class:`~kfpga.core.config.FilterConfig` of a 53H smoother
-        (``model/tukey53h.py``) between the controller and the core: every ADC channel read has
-        its own window, the core gets each sample 4 samples late, with its outliers (ADC
-        glitches) replaced. Its formats must be ones that cannot overflow (the defaults).
+        ``None``, or the :class:`~kfpga.core.config.FilterConfig` of a filter that can stand before
+        another (its spec's ``prefilter``, such as an outlier smoother) between the controller and
+        the core: every ADC channel read has its own state, the core gets each sample as many
+        samples late as the pre-filter delays it. Its formats must be ones that cannot overflow
+        (the defaults).
 
     Members
     -------

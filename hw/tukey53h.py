@@ -32,10 +32,10 @@ from kfpga.hw.core import Core, register_stage, write_estimate
 from kfpga.hw.storage import at, check_channels
 from kfpga.model import tukey53h as eq
 
-__all__ = ["Tukey53HCore", "make_core"]
+__all__ = ["OnlineCore", "make_core"]
 
 
-class Tukey53HCore(Core):
+class OnlineCore(Core):
     """The online 53H smoother for ``channels`` (1..8) interleaved channels; the stream contract
     of :class:`~kfpga.hw.core.Core` (one output per input, in order)."""
 
@@ -154,5 +154,5 @@ class Tukey53HCore(Core):
 def make_core(config, variant="online", *, channels=1):
     """The registry's core factory (``kfpga.model.tukey53h.SPEC.core``); a bad channel count is
     refused before anything is built."""
-    check_channels(channels, Tukey53HCore.max_channels)
-    return Tukey53HCore(config, variant, channels=channels)
+    check_channels(channels, OnlineCore.max_channels)
+    return OnlineCore(config, variant, channels=channels)

@@ -6,7 +6,7 @@ Per axis of a track, with the measurement ``z`` and the sample period ``T``::
     x  = xp + alpha (z - xp)
     v  = v + (beta / T) (z - xp)
 
-It runs in the datapath units of the 2-state Kalman filter (``model/kalman2.py``): the state is
+It runs in the datapath units of the paper's 2-state Kalman filter (``model/cvloop.py``): the state is
 ``x`` and the rate per sample ``T v``, so T never multiplies inside the loop and the update is
 the steady-state Kalman update with the gains ``alpha`` and ``beta`` (the steady-state Kalman
 filter *is* an alpha-beta filter with ``alpha = K1``, ``beta = T K2``; the tests hold the two
@@ -41,13 +41,16 @@ import numpy as np
 from kfpga.core.errors import ConfigError
 from kfpga.core.formats import register_formats
 from kfpga.core.params import number, vector
-from kfpga.core.spec import Constant, FilterSpec, Output, Variant
-from kfpga.model import kalman2 as eq
+from kfpga.core.spec import Constant, FilterSpec, Mode, MutationBlock, Output, Variant
+from kfpga.model import cvloop as eq
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
 from kfpga.model.reference import steady_error_std
 
-__all__ = ["AlphaBetaParams", "SPEC", "POINTS", "update", "reference", "benedict_bordner", "critically_damped",
-           "kalman_relation", "from_kalman", "stable"]
+__all__ = ["AlphaBetaParams", "SPEC", "POINTS", "VARIANTS", "update", "reference", "benedict_bordner",
+           "critically_damped", "kalman_relation", "from_kalman", "stable", "MAX_TRACKS"]
+
+#: Tracks one core can hold (two states each, one per axis; ``hw/alphabeta.py``).
+MAX_TRACKS = 256
 
 
 def benedict_bordner(alpha):
@@ -131,7 +134,7 @@ def from_kalman(params):
     return AlphaBetaParams(alpha=k1, beta=k2, T=params.T, R=params.R, x0=params.x0)
 
 
-POINTS = {name: point for name, point in eq.POINTS.items() if name in ("x1", "xl1", "v", "x2", "e", "gain", "inv_t", "vt")}
+POINTS = {name: point for name, point in eq.POINTS.items() if name in eq.LOOP_POINTS}
 
 
 def update(ops, k, x, u):
@@ -145,11 +148,8 @@ def update(ops, k, x, u):
 
 def _constants(params):
     # named k1, k2 as the steady-state Kalman core's gains: the same steps build both cores
-    shift = eq.t_exponent(params.T)
-    out = {"k1": Constant(params.alpha, "gain", "alpha"), "k2": Constant(params.beta, "gain", "beta"), "t_shift": shift}
-    if shift is None:
-        out["inv_t"] = Constant(1.0 / params.T, "inv_t", "1/T")
-    return out
+    return {"k1": Constant(params.alpha, "gain", "alpha"), "k2": Constant(params.beta, "gain", "beta"),
+            **eq.rate_constants(params)}
 
 
 def _initial(params):
@@ -219,13 +219,71 @@ def _random_params(rng):
 
 
 def _goals(config, variant, channels=1):
-    """As the steady-state Kalman core's: the same loop (two multipliers, none for a
-    power-of-two gain, one more when T is not a power of two)."""
-    return eq.SPEC.goals(config, "steady", channels)
+    """The constant-gain loop's (two multipliers, none for a power-of-two gain, one more when T is
+    not a power of two)."""
+    return eq.steady_goals(config, channels)
+
+
+def _track_columns(config, tracks):
+    from kfpga.core.errors import UsageError
+
+    if not 1 <= tracks <= MAX_TRACKS:
+        raise UsageError(f"--tracks must be 1..{MAX_TRACKS} (the tracker's limit), not {tracks}")
+    return ("track", "axis", *config.inputs)
+
+
+def _replay_tracks(config, variant, samples, tracks, *, exact, source):
+    """``kfpga filter --tracks N``: a multi-target replay through per-(track, axis) states, as the
+    many-track core has them (state ``2 track + axis``)."""
+    from kfpga.core.errors import InputError
+    from kfpga.core.fixedmodel import FixedModel
+
+    track, axis = samples["track"], samples["axis"]
+    for name, values, top in (("track", track, tracks - 1), ("axis", axis, 1)):
+        bad = np.flatnonzero((values < 0) | (values > top))
+        if bad.size:
+            k = int(bad[0])
+            raise InputError(f"{source}: line {k + 2}: {name} = {int(values[k])} is outside 0..{top}"
+                             + (f" (--tracks {tracks})" if name == "track" else ""))
+    state = 2 * track + axis
+    z = {name: samples[name] for name in config.inputs}
+    if not exact:
+        columns = {o: np.zeros(len(state)) for o in config.output_names}
+        for s in np.unique(state):
+            idx = np.flatnonzero(state == s)
+            out = reference(config.params, variant, *(z[n][idx].astype(float) for n in config.inputs))
+            for o in config.output_names:
+                columns[o][idx] = out[o]
+    else:
+        model = FixedModel(config, variant=variant)
+        raw, overflow, _ = model.run_channels(z, state)
+        columns = {o: model.output_format(o).to_float(raw[o]) for o in config.output_names}
+        columns["overflow"] = overflow
+    return {"track": track, "axis": axis, **columns}, f"{len(state)} plots of {len(np.unique(track))} track(s)"
+
+
+TRACKS = Mode(
+    option="--tracks",
+    argument={"type": int, "metavar": "N",
+              "help": "replay a multi-target recording of N tracks (1..256): columns track (0..N-1), axis (0 or 1) and "
+                      "z, in the order the plots came; each track and axis has its own state, as in the many-track "
+                      "core; the output has track, axis, x, v"},
+    columns=_track_columns,
+    run=_replay_tracks,
+)
+
+
+def _mutation():
+    """``make mutate``: the loop with its state narrower than its range (each write then saturates,
+    some samples alone, in 1,200 stress samples)."""
+    from kfpga.core.config import FilterConfig
+
+    return [MutationBlock("alphabeta core", eq.stressed(FilterConfig(filter=SPEC.name), 14), "steady", {"samples": 1200})]
 
 
 SPEC = FilterSpec(
-    name="alpha-beta",
+    name="alphabeta",
+    aliases=("alpha-beta",),
     summary="alpha-beta tracker (marine radar ARPA), constant gains alpha, beta; one axis of a track per channel",
     source="seeds/004: Chen and Yang 2016, Research on the alpha-beta algorithm of a marine radar ARPA system",
     params=AlphaBetaParams,
@@ -250,4 +308,7 @@ SPEC = FilterSpec(
                         lambda: AlphaBetaParams(alpha=0.5, beta=critically_damped(0.5))),
     },
     error_std=_error_std,
+    evaluation="kfpga.model.evaluations.alphabeta:EVALUATION",
+    modes=(TRACKS,),
+    mutation=_mutation,
 )

@@ -41,6 +41,7 @@ from kfpga.core.formats import noise_frac_bits, register_formats
 from kfpga.core.params import matrix, number
 from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
+from kfpga.model.riccati import PBHError, check_pbh, dare
 
 __all__ = ["StateSpaceParams", "SPEC", "PRESETS", "dare_gain", "reference", "steady_update", "full_update", "free",
            "PBHError", "predict_sums", "predict", "observe", "innovations", "gain_products", "correct", "covariance_fp",
@@ -197,56 +198,15 @@ def exact_format(value):
 # -- the Riccati equation ----------------------------------------------------------------------
 
 
-class PBHError(ValueError):
-    """The steady-state gain does not exist: a mode is not detectable or not stabilisable."""
+def dare_gain(params):
+    """The steady-state gain K (n x m) and predicted covariance of the model's discrete Riccati
+    equation (:func:`~kfpga.model.riccati.dare`); :class:`PBHError` when none stabilises."""
+    return dare(*params.arrays())
 
 
 def _check_pbh(params):
     f, gqg, h, _ = params.arrays()
-    n = params.n
-    w, v = np.linalg.eigh(gqg)
-    root = v @ np.diag(np.sqrt(np.clip(w, 0, None)))  # G Q^1/2 (up to an orthogonal factor)
-    for lam in np.linalg.eigvals(f):
-        if abs(lam) < 1 - 1e-9:
-            continue
-        a = lam * np.eye(n) - f
-        if np.linalg.matrix_rank(np.vstack([a, h]), tol=1e-9) < n:
-            raise PBHError(f"(F, H) is not detectable: F's mode of eigenvalue {lam:.4g} is not stable and H does not "
-                           "see it, so the steady-state gain does not exist (observe that state, or use the full variant)")
-        if np.linalg.matrix_rank(np.hstack([a, root]), tol=1e-9) < n:
-            raise PBHError(f"(F, G Q^1/2) is not stabilisable: F's mode of eigenvalue {lam:.4g} is not stable and no "
-                           "process noise reaches it, so the Riccati equation has no stabilising solution (add noise "
-                           "to that state, or use the full variant)")
-
-
-def dare_gain(params):
-    """The steady-state gain K (n x m) and predicted covariance of the discrete Riccati equation.
-
-    Solves ``P = F P F^T - F P H^T (H P H^T + R)^-1 H P F^T + G Q G^T`` by the structure-preserving
-    doubling algorithm (quadratic convergence even with poles near 1); ``K = P H^T (H P H^T + R)^-1``.
-    Raises :class:`PBHError` when no stabilising solution exists.
-    """
-    _check_pbh(params)
-    f, gqg, h, r = params.arrays()
-    n = params.n
-    a = f.T.copy()
-    g = h.T @ np.linalg.inv(r) @ h
-    q = gqg.copy()
-    eye = np.eye(n)
-    for _ in range(200):
-        w = np.linalg.inv(eye + g @ q)
-        a_next = a @ w @ a
-        g_next = g + a @ w @ g @ a.T
-        q_next = q + a.T @ q @ w @ a
-        done = np.max(np.abs(q_next - q)) <= 1e-15 * max(np.max(np.abs(q_next)), 1e-300)
-        a, g, q = a_next, g_next, q_next
-        if done:
-            break
-    else:  # pragma: no cover - converges in a few dozen steps once PBH holds
-        raise ArithmeticError("Riccati doubling did not converge")
-    p = (q + q.T) / 2
-    k = p @ h.T @ np.linalg.inv(h @ p @ h.T + r)
-    return k, p
+    check_pbh(f, gqg, h)
 
 
 def steady_gain(params):
@@ -562,7 +522,7 @@ def _full_state(params):
     return _steady_state(params) + tuple((f"p{i + 1}{j + 1}", f"p{i + 1}{j + 1}") for i, j in tri)
 
 
-VARIANT_SPECS = {
+VARIANTS = {
     "steady": Variant("steady", "constant gain K from the Riccati equation (or given): no divider",
                       _steady_state, _steady_constants, _initial, steady_update, _steady_applies),
     "full": Variant("full", "time-varying gain: P, S and a restoring divider per update (two observations: "
@@ -643,7 +603,7 @@ def _stimulus(params):
 
 def _ranges(params, stimulus=None):
     stimulus = _stimulus(params) if stimulus is None else stimulus
-    variants = [v for name, v in VARIANT_SPECS.items() if v.applies(params) is None]
+    variants = [v for name, v in VARIANTS.items() if v.applies(params) is None]
     return float_ranges(SPEC, params, variants, stimulus)
 
 
@@ -692,10 +652,6 @@ def _validate(config):
         if f[r_point].lsb / 2 > min(params.R[j][j] for j in range(params.m)):
             raise ConfigError(f"model.R rounds to 0 in formats.{r_point} = {f[r_point]} (LSB {f[r_point].lsb:g}): the "
                               f"divisor could be 0; give {r_point} more fraction bits")
-
-
-def _reference(params, variant, y):
-    return reference(params, variant, y)
 
 
 def _goals(config, variant, channels=1):
@@ -781,7 +737,7 @@ def _preset_va2():
                             observations=("velocity", "acceleration"))
 
 
-def _preset_alpha_beta():
+def _preset_fixed_gain():
     alpha, beta = 0.5, 0.5
     return StateSpaceParams(F=((1.0, 1.0), (0.0, 1.0)), gain=((alpha,), (beta,)), T=1.0)
 
@@ -793,8 +749,8 @@ PRESETS = {
     "ca3": ("constant acceleration, T = 0.5 s (seeds/000, the ship-roll predictor; A's bottom-right entry 1; "
             "P0 = 10 I, as the paper's all-10s matrix is singular)", _preset_ca3),
     "va2": ("velocity and acceleration, both observed (seeds/003, fed by the least-squares front end)", _preset_va2),
-    "alpha-beta": ("fixed gain alpha = beta = 0.5 on the constant-velocity model (seeds/004's values)",
-                   _preset_alpha_beta),
+    "cv2-fixed-gain": ("fixed gain alpha = beta = 0.5 on the constant-velocity model (seeds/004's values)",
+                       _preset_fixed_gain),
 }
 
 
@@ -822,12 +778,12 @@ SPEC = FilterSpec(
     points=POINTS,
     inputs=_inputs,
     outputs=_outputs_for,
-    variants=VARIANT_SPECS,
+    variants=VARIANTS,
     points_for=_points_for,
     default_formats=_default_formats,
     ranges=_ranges,
     validate=_validate,
-    reference=_reference,
+    reference=reference,
     core="kfpga.hw.kalman:make_core",
     goals=_goals,
     default_output="x1",

@@ -36,93 +36,34 @@ into the 18-bit operand ``vt`` first. Any saturation (or wrap) sets the sample's
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
+from kfpga.core.board import WORST_PATH_GOAL_NS
 from kfpga.core.errors import ConfigError
-from kfpga.core.fixed import QFormat, Rounding
-from kfpga.core.formats import noise_frac_bits, register_formats
-from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
+from kfpga.core.formats import register_formats
+from kfpga.core.spec import Constant, FilterSpec, MutationBlock, Output, Variant
+from kfpga.model.cvloop import (
+    POINTS,
+    correct,
+    finish_formats,
+    innovation,
+    predict,
+    rate,
+    rate_constants,
+    steady_gain,
+    steady_goals,
+    stressed,
+    t_exponent,
+)
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
 from kfpga.model.reference import KalmanParams, kalman_decomposed, steady_error_std, steady_state, steady_state_gain
 
-__all__ = ["SPEC", "POINTS", "t_exponent", "steady_gain", "finish_formats", "predict", "innovation", "correct", "rate",
-           "rate_operand", "rate_product", "rate_write",
-           "covariance_predict", "innovation_variance", "gains", "covariance_correct", "steady_update",
-           "full_update"]
+__all__ = ["SPEC", "VARIANTS", "reference", "covariance_predict", "innovation_variance", "gains", "covariance_correct",
+           "full_products", "steady_update", "full_update"]
 
-VARIANTS = ("steady", "full")
-
-POINTS = {
-    p.name: p
-    for p in (
-        Point("x1", "filtered position x1 (state, output)"),
-        Point("xl1", "predicted position xl1 = x1 + v (output yhat)", same_as="x1"),
-        Point("v", "rate per sample v = T*x2 (state)"),
-        Point("x2", "rate output x2 = v / T"),
-        Point("e", "innovation e = y - xl1", role="operand"),
-        Point("gain", "gains K1, T*K2 (constants, or the divider's quotients)", role="operand"),
-        Point("p", "covariance p11, p12, p21, p22 (state)", variants=("full",), frac="pl"),
-        Point("pl", "predicted covariance pl11..pl22", role="operand", variants=("full",)),
-        Point("s", "innovation covariance S = pl11 + R (divisor)", variants=("full",), frac="pl"),
-        Point("inv_t", "1/T, when T is not a power of two", role="operand", constant=True),
-        Point("vt", "rate operand of x2 = v * (1/T), when T is not a power of two", role="operand"),
-    )
-}
-
-
-def t_exponent(T):
-    """``k`` if ``T == 2**k`` exactly, else ``None``."""
-    mantissa, exponent = math.frexp(T)
-    return exponent - 1 if mantissa == 0.5 else None
-
-
-def steady_gain(params):
-    """Float ``(K1, T*K2)`` of the steady-state filter, in datapath units."""
-    (k1, k2), _ = steady_state_gain(params.T, params.Q, params.R)
-    return k1, k2 * params.T
 
 
 # -- the equations -------------------------------------------------------------------------------
-
-
-def predict(ops, x1, v):
-    """xl1 = x1 + v: the predicted position, also the one-step output prediction yhat."""
-    return ops.rq(ops.add(x1, v), "xl1")
-
-
-def innovation(ops, y, xl1):
-    """e = y - xl1."""
-    return ops.rq(ops.sub(y, xl1), "e")
-
-
-def correct(ops, x, ke, point):
-    """x = x + K e (a state corrected by a gain-times-innovation product)."""
-    return ops.rq(ops.add(x, ke), point)
-
-
-def rate_operand(ops, k, v):
-    """The first step of x2 = v / T: v with its binary point moved by k when T = 2**k, else v
-    rounded into the 18-bit multiplier operand vt."""
-    if k["t_shift"] is not None:
-        return ops.shift(v, -k["t_shift"])
-    return ops.rq(v, "vt")
-
-
-def rate_product(ops, k, vt):
-    """The second step: nothing when T = 2**k, else the product vt * (1/T)."""
-    return vt if k["t_shift"] is not None else ops.mul(vt, k["inv_t"])
-
-
-def rate_write(ops, k, value):
-    """The last step: the rate written into x2."""
-    return ops.rq(value, "x2")
-
-
-def rate(ops, k, v):
-    """x2 = v / T: the binary point moved when T = 2**k, else [v]_vt * (1/T)."""
-    return rate_write(ops, k, rate_product(ops, k, rate_operand(ops, k, v)))
 
 
 def covariance_predict(ops, k, p11, p12, p21, p22):
@@ -183,22 +124,14 @@ def full_update(ops, k, x, u):
 # -- what the spec needs -----------------------------------------------------------------------
 
 
-def _rate_constants(params):
-    shift = t_exponent(params.T)
-    out = {"t_shift": shift}
-    if shift is None:
-        out["inv_t"] = Constant(1.0 / params.T, "inv_t", "1/T")
-    return out
-
-
 def _steady_constants(params):
     k1, k2 = steady_gain(params)
-    return {"k1": Constant(k1, "gain", "K1"), "k2": Constant(k2, "gain", "T*K2"), **_rate_constants(params)}
+    return {"k1": Constant(k1, "gain", "K1"), "k2": Constant(k2, "gain", "T*K2"), **rate_constants(params)}
 
 
 def _full_constants(params):
     scaled = params.scaled()
-    return {"q": Constant(scaled.Q, "pl", "T^2*Q"), "r": Constant(params.R, "s", "R"), **_rate_constants(params)}
+    return {"q": Constant(scaled.Q, "pl", "T^2*Q"), "r": Constant(params.R, "s", "R"), **rate_constants(params)}
 
 
 def _initial(params):
@@ -233,7 +166,7 @@ def _steady_applies(params):
     return None
 
 
-VARIANT_SPECS = {
+VARIANTS = {
     "steady": Variant("steady", "constant gain K_inf (an alpha-beta filter): one update per sample, no divider",
                       (("x1", "x1"), ("v", "v")), _steady_constants, _initial, steady_update, _steady_applies),
     "full": Variant("full", "time-varying gain: covariance and two restoring dividers per update",
@@ -252,7 +185,7 @@ def _points_for(params):
 def _ranges(params, stimulus=None):
     """Largest magnitude of each point over both variants (one config serves both)."""
     stimulus = full_scale_stimulus(params.R) if stimulus is None else stimulus
-    variants = [v for name, v in VARIANT_SPECS.items() if name == "full" or params.Q > 0]
+    variants = [v for name, v in VARIANTS.items() if name == "full" or params.Q > 0]
     return float_ranges(SPEC, params, variants, stimulus)
 
 
@@ -264,23 +197,6 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
              if err else None)
     formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, noise=noise)
     return finish_formats(params, formats, state_frac=state_frac)
-
-
-def finish_formats(params, formats, *, state_frac):
-    """The rules of the innovation and the rate output on top of the register rules, for the
-    filters of this loop (this one and the alpha-beta tracker): ``params`` has T and R."""
-    # the innovation's step small against the measurement noise (more than the multiplier's 18
-    # bits then: a second multiplier piece per product), but no finer than the states
-    e = formats["e"]
-    want = min(max(e.frac_bits, noise_frac_bits(params.R)), max(e.frac_bits, state_frac))
-    if want > e.frac_bits:
-        formats["e"] = QFormat(e.int_bits, want, e.rounding, e.overflow)
-    k = t_exponent(params.T)
-    fv = formats["v"]
-    if k is not None and fv.int_bits - k >= 1 and fv.frac_bits + k >= 0:
-        # x2 = v / 2**k: the same bits, the binary point moved (a free shift)
-        formats["x2"] = QFormat(fv.int_bits - k, fv.frac_bits + k, Rounding.NEAREST)
-    return formats
 
 
 def _validate(config):
@@ -302,7 +218,7 @@ def _validate(config):
         )
 
 
-def _reference(params, variant, y):
+def reference(params, variant, y):
     """The float filter in input units: x1, x2, yhat."""
     out = steady_state(y, params) if variant == "steady" else kalman_decomposed(y, params)
     return {"x1": out["x1"], "x2": out["x2"], "yhat": out["yhat"]}
@@ -317,20 +233,13 @@ def _random_params(rng):
                         x0=(float(rng.normal(0, 100)), float(rng.normal(0, 5))))
 
 
-#: The timing goal of every core and of the whole design: 75 MHz on the -8 part, a 1.5x margin
-#: at the board's 50 MHz (the estimate of ``kfpga/hw/timing.py``).
-WORST_PATH_GOAL_NS = round(1000.0 / 75.0, 2)
-
-
 def _goals(config, variant, channels=1):
-    """One channel: 400 / 2,000 logic cells; each further channel state may add about three cells
-    per state bit for its registers, their read mux and write enable (150 for the steady core's
-    x1, v: 51 bits; 300 for the time-varying core's six registers: 119 bits). Every path within
-    13.33 ns (75 MHz estimated)."""
+    """The steady core: the constant-gain loop's (:func:`~kfpga.model.cvloop.steady_goals`). The
+    time-varying core: 2,000 logic cells for one channel, about 300 more per further channel
+    state (three cells per state bit of its six registers: 119 bits). Every path within 13.33 ns
+    (75 MHz estimated)."""
     if variant == "steady":
-        return {"logic_cells": 400 + 150 * (channels - 1),
-                "mul18": 2 + (0 if t_exponent(config.params.T) is not None else 1), "lut_levels": 16,
-                "worst_path_ns": WORST_PATH_GOAL_NS}
+        return steady_goals(config, channels)
     return {"logic_cells": 2000 + 300 * (channels - 1), "mul18": 12, "lut_levels": 16,
             "worst_path_ns": WORST_PATH_GOAL_NS}
 
@@ -348,6 +257,21 @@ def _error_std(params, *, measurement_only=False):
     return {"x1": s1, "x2": s2, "yhat": sy}
 
 
+def _mutation():
+    """``make mutate``: the steady core with its state narrower than its range (each of its four
+    writes then saturates, some samples alone, in 1,200 stress samples), and the time-varying core
+    with x1 a bit narrower than its range (its write then saturates alone on some stress samples,
+    so the bench sees that flag reach the estimate by itself)."""
+    from kfpga.core.config import FilterConfig
+    from kfpga.core.fixed import QFormat
+
+    config = FilterConfig(filter=SPEC.name)
+    narrow = FilterConfig(filter=SPEC.name, formats={"x1": QFormat(16, config.formats["x1"].frac_bits)},
+                          check_ranges=False)
+    return [MutationBlock("steady core", stressed(config, 13), "steady", {"samples": 1200}),
+            MutationBlock("full core", narrow, "full", {"samples": 150})]
+
+
 SPEC = FilterSpec(
     name="kalman2",
     summary="the paper's 2-state Kalman filter (angle, rate), steady-state or time-varying gain",
@@ -357,16 +281,17 @@ SPEC = FilterSpec(
     inputs=(("y", "the ADC code"),),
     outputs=(Output("x1", "x1", "filtered position"), Output("x2", "x2", "rate"),
              Output("yhat", "xl1", "one-step prediction of y")),
-    variants=VARIANT_SPECS,
+    variants=VARIANTS,
     points_for=_points_for,
     default_formats=_default_formats,
     ranges=_ranges,
     validate=_validate,
-    reference=_reference,
+    reference=reference,
     core="kfpga.hw.kalman2:make_core",
     goals=_goals,
     default_output="x1",
     random_params=_random_params,
     presets={"cv2": ("the paper's constant-velocity filter (seeds/001): T = 1, Q = 2, R = 4, P0 = 10 I", KalmanParams)},
     error_std=_error_std,
+    mutation=_mutation,
 )

@@ -34,7 +34,7 @@ import numpy as np
 from kfpga.core.ads8364 import CODE_FORMAT, CODE_MAX
 from kfpga.core.fixed import QFormat, Rounding, bits_for
 from kfpga.core.params import number
-from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
+from kfpga.core.spec import Constant, FilterSpec, MutationBlock, Output, Point, Variant
 
 #: The longest window the table may name.
 MAX_WINDOW = 64
@@ -298,28 +298,24 @@ def fit_bounds(n):
 
 def code_model(params, m, n=None):
     """The ``va2`` model in the codes' units for mode ``m`` (1: the raw velocity; 2: the fit of a
-    window of ``n``), as :class:`~kfpga.model.kalman.StateSpaceParams`."""
-    from kfpga.model.kalman import StateSpaceParams
-
+    window of ``n``): ``(F, G Q G^T, H, R)`` as arrays."""
     scale = params.lsb ** 2
     q = params.q * params.T ** 2 / scale  # the acceleration's change per step, in (codes/sample)^2
+    f, gqg = np.array([[1.0, 1.0], [0.0, 1.0]]), np.array([[0.0, 0.0], [0.0, q]])
     if m == 1:
-        return StateSpaceParams(F=((1.0, 1.0), (0.0, 1.0)), G=((0.0,), (1.0,)), Q=((q,),), H=((1.0, 0.0),),
-                                R=((params.r / scale,),), P0=((1.0, 0.0), (0.0, 1.0)))
+        return f, gqg, np.array([[1.0, 0.0]]), np.array([[params.r / scale]])
     var_v, var_a = fit_variances(n, params.r, params.T)
-    return StateSpaceParams(F=((1.0, 1.0), (0.0, 1.0)), G=((0.0,), (1.0,)), Q=((q,),), H=((1.0, 0.0), (0.0, 1.0)),
-                            R=((var_v / scale, 0.0), (0.0, var_a * params.T ** 2 / scale)),
-                            P0=((1.0, 0.0), (0.0, 1.0)), observations=("velocity", "slope"))
+    return f, gqg, np.eye(2), np.diag([var_v / scale, var_a * params.T ** 2 / scale])
 
 
 def mode_gains(params):
     """``{0: K (2 x 2), n: K (2 x 2), ...}``: the steady-state gain of each mode (0: m = 1, its
     second column 0; n: the fit of a window of n), from the discrete Riccati equation."""
-    from kfpga.model.kalman import dare_gain
+    from kfpga.model.riccati import dare
 
-    out = {0: np.hstack([dare_gain(code_model(params, 1))[0], np.zeros((2, 1))])}
+    out = {0: np.hstack([dare(*code_model(params, 1))[0], np.zeros((2, 1))])}
     for n in params.windows:
-        out[n] = dare_gain(code_model(params, 2, n))[0]
+        out[n] = dare(*code_model(params, 2, n))[0]
     return out
 
 
@@ -569,7 +565,7 @@ def _scenario(name, n, seed, params):
     return truth / params.lsb, codes
 
 
-def _reference(params, variant, y):
+def reference(params, variant, y):
     return switched(y, params)
 
 
@@ -580,8 +576,16 @@ VARIANTS = {
 }
 
 
+def _mutation():
+    """``make mutate``: the sequential core of the front end on 120 stress samples."""
+    from kfpga.core.config import FilterConfig
+
+    return [MutationBlock("sequential core (lsfront)", FilterConfig(filter=SPEC.name), "steady", {"samples": 120})]
+
+
 SPEC = FilterSpec(
-    name="ls-frontend",
+    name="lsfront",
+    aliases=("ls-frontend",),
     summary="the least-squares pseudo-acceleration front end into the va2 filter: a line through the last Ns speed-log "
             "samples gives the velocity and its slope, Ns from the innovation; steady-state gains per mode",
     source="seeds/003: Furuno, JP3218441B2, a ship's speed with a least-squares front end to a Kalman filter",
@@ -596,10 +600,12 @@ SPEC = FilterSpec(
     default_formats=_default_formats,
     ranges=_ranges,
     validate=_validate,
-    reference=_reference,
+    reference=reference,
     core="kfpga.hw.lsfront:make_core",
     goals=_goals,
     default_output="velocity",
     random_params=_random_params,
     scenario=_scenario,
+    evaluation="kfpga.model.evaluations.lsfront:EVALUATION",
+    mutation=_mutation,
 )

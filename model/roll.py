@@ -570,6 +570,7 @@ SPEC = FilterSpec(
     default_output="pred",
     random_params=_random_params,
     scenario=_scenario,
+    evaluation="kfpga.model.evaluations.roll:EVALUATION",
 )
 
 

@@ -43,10 +43,11 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from kfpga.core.ads8364 import CODE_FORMAT, CODE_MAX
+from kfpga.core.board import WORST_PATH_GOAL_NS
 from kfpga.core.fixed import QFormat, Rounding
 from kfpga.core.formats import precision_frac_bits
 from kfpga.core.params import number
-from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
+from kfpga.core.spec import Constant, FilterSpec, Mode, MutationBlock, Output, Point, Prefilter, Variant
 
 __all__ = ["Tukey53HParams", "SPEC", "POINTS", "FLAG", "DELAY", "MIN_OFFLINE", "update", "median5", "median3",
            "MEDIAN5", "MEDIAN3", "network_layer", "network_reads", "hanning_partial", "hanning", "residual", "decide",
@@ -327,8 +328,6 @@ def _goals(config, variant, channels=1):
     14 pipeline stages), each further channel about two cells per state bit (its registers,
     their read multiplexer and write enable: 260 for the 8 samples and the flag); every path
     within 13.33 ns (75 MHz estimated), the Kalman cores' goal."""
-    from kfpga.model.kalman2 import WORST_PATH_GOAL_NS
-
     return {"logic_cells": 1400 + 260 * (channels - 1), "mul18": 0, "lut_levels": 10, "worst_path_ns": WORST_PATH_GOAL_NS}
 
 
@@ -371,12 +370,72 @@ def _formal_config():
     from kfpga.core.config import FilterConfig
 
     narrow = QFormat(3, 0)
-    return FilterConfig(filter="53h", params=Tukey53HParams(threshold=1.0), check_ranges=False,
+    return FilterConfig(filter="tukey53h", params=Tukey53HParams(threshold=1.0), check_ranges=False,
                         formats={"x": narrow, "x3": QFormat(3, 0, Rounding.NEAREST), "y": narrow, "threshold": narrow})
 
 
+def _offline_mode(config, variant, samples, value, *, exact, source):
+    """``kfpga filter --offline``: the offline 53H of the whole file, every row decided in place."""
+    from kfpga.core.errors import InputError
+    from kfpga.core.fixedmodel import FixedModel
+
+    y = samples[config.inputs[0]]
+    if len(y) < MIN_OFFLINE:
+        raise InputError(f"{source}: {len(y)} rows; the offline 53H needs at least {MIN_OFFLINE} (it reverses the "
+                         "first and the last 8)")
+    what = f"{len(y)} samples (offline)"
+    if not exact:
+        return {"y": offline(y, config.params)}, what
+    model = FixedModel(config, variant=variant)
+    out = offline(y, run=lambda x: model.run(x).y)
+    # each row's flag from the run that decided it: the same mapping as the values
+    flags = offline(y, run=lambda x: model.run(x).overflow)
+    return {"y": model.output_format("y").to_float(out), "overflow": flags}, what
+
+
+OFFLINE = Mode(
+    option="--offline",
+    argument={"action": "store_true",
+              "help": "the offline 53H smoother of the whole file, every row decided in place (the first and last 4 "
+                      "from the reversed ends, as the paper's improved 53H); at least 16 rows. Without it, row n holds "
+                      "the online decision on row n - 4"},
+    columns=lambda config, value: config.inputs,
+    run=_offline_mode,
+)
+
+
+def _prefilter_params(values):
+    threshold = values.get("threshold")
+    return Tukey53HParams() if threshold is None else Tukey53HParams(threshold=threshold)
+
+
+#: Before another filter on the board: every ADC channel its own window, glitches replaced.
+PREFILTER = Prefilter(
+    summary="Tukey's 53H outlier smoother between the ADS8364 controller and the core: every ADC channel gets its own "
+            "window, glitches are replaced, each sample reaches the core 4 samples late",
+    delay=DELAY,
+    options={"--threshold": {"type": float, "metavar": "CODES",
+                             "help": "the 53H pre-filter's outlier threshold in ADC codes (default: 500; a physical "
+                                     "limit such as a_max*T or omega_max*T in codes)"}},
+    params=_prefilter_params,
+    bound=lambda params: params.threshold,
+)
+
+
+def _mutation():
+    """``make mutate``: two channels (the channel pipeline then carries a bit), on stress codes and
+    spikes at the threshold's boundary, both signs."""
+    from kfpga.core.config import FilterConfig
+    from kfpga.model.scenarios import stress_codes, threshold_codes
+
+    config = FilterConfig(filter=SPEC.name)
+    codes = [int(c) for c in np.r_[stress_codes(1, 300), threshold_codes(1, 480, config.params.threshold, hold=24)]]
+    return [MutationBlock("tukey53h core", config, "online", {"codes": codes, "order": "round-robin"}, channels=2)]
+
+
 SPEC = FilterSpec(
-    name="53h",
+    name="tukey53h",
+    aliases=("53h",),
     summary="Tukey's 53H outlier smoother (medians of 5 and 3, Hanning, threshold test); 4 samples late",
     source="seeds/002: Lü and Geng 2019, online smoothing of ship integrated-navigation data by 53H filtering",
     params=Tukey53HParams,
@@ -401,4 +460,8 @@ SPEC = FilterSpec(
                          "3 deg/s (300 codes)", lambda: Tukey53HParams(threshold=attitude_threshold(3.0, 1.0, 0.01))),
     },
     formal_config=_formal_config,
+    evaluation="kfpga.model.evaluations.tukey53h:EVALUATION",
+    modes=(OFFLINE,),
+    prefilter=PREFILTER,
+    mutation=_mutation,
 )

@@ -5,43 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
-from kfpga.flows.csvio import read_header, read_samples
+from kfpga.core.csvio import read_header, read_samples
 from kfpga.model import scenarios
 from kfpga.model.reference import KalmanParams
+from kfpga.model.scenarios import stress_codes, threshold_codes
 
 __all__ = ["Source", "scenario_source", "csv_source", "stress_codes", "threshold_codes"]
-
-
-def threshold_codes(seed, n, threshold, *, hold=12):
-    """Codes at an outlier test's boundary: levels held for ``hold`` samples (12: the medians
-    and the Hanning value of their middle are the level itself; 24 for two channels taking
-    turns), each with one spike ``level + d`` in the middle, ``|d|`` = ``threshold`` - 2 ..
-    ``threshold`` + 2 (an integer threshold: rounded down) of either sign: a comparison or an
-    absolute value a few codes off decides some of them the other way."""
-    rng = np.random.default_rng(seed)
-    t = int(threshold)
-    levels = rng.integers(CODE_MIN + t + 3, CODE_MAX - t - 2, n // hold + 1)
-    y = np.repeat(levels, hold)[:n]
-    offsets = rng.choice([t - 2, t - 1, t, t + 1, t + 2], len(levels)) * rng.choice([-1, 1], len(levels))
-    spikes = np.arange(hold // 2, n, hold)
-    y[spikes] += offsets[: len(spikes)]
-    return y.astype(np.int64)
-
-
-def stress_codes(seed, n):
-    """Codes that exercise a filter's corners: random walk + noise, full-scale steps both ways,
-    a full-scale square wave (its overshoot saturates the innovation), extreme codes at random."""
-    rng = np.random.default_rng(seed)
-    y = np.cumsum(rng.normal(0, 300, n)) + rng.normal(0, 40, n)
-    y = np.clip(np.round(y), CODE_MIN, CODE_MAX)
-    k = n // 8
-    y[k:k + 30] = CODE_MAX
-    y[k + 30:k + 60] = CODE_MIN
-    square = np.tile(np.repeat([CODE_MAX, CODE_MIN], 5), 20)
-    y[2 * k:2 * k + len(square)] = square[: max(0, min(len(square), n - 2 * k))]
-    y[rng.integers(0, n, max(n // 50, 1))] = CODE_MIN
-    y[rng.integers(0, n, max(n // 50, 1))] = CODE_MAX
-    return y.astype(np.int64)
 
 
 class Source:

@@ -42,6 +42,10 @@ from kfpga.sim.sources import csv_source, scenario_source
 __all__ = ["make_source", "Update", "updates_of", "conversions_for", "SystemRecords", "SystemBuild", "build", "run",
            "SystemRunFailed"]
 
+#: Codes from the truth beyond which an estimate counts as hit by a glitch, when no pre-filter
+#: states its own bound: far beyond the scenarios' noise, far below a full-scale glitch.
+GLITCH_BOUND = 500.0
+
 
 def load_config(params, key="config_toml"):
     import tomllib
@@ -202,20 +206,18 @@ class SystemRecords:
 
     def _truth_of(self, reads, channels):
         """The truth of each estimate of ``reads`` (``None`` for a source without one): its
-        conversion's, 4 conversions before with the pre-filter, which passes each sample on 4 later."""
+        conversion's, as many conversions before as the pre-filter delays each sample."""
         truth = getattr(self.source, "truth", None)
         if truth is None:
             return None
-        late = 4 if self.prefilter is not None else 0
+        late = self.prefilter.spec.prefilter.delay if self.prefilter is not None else 0
         return truth[channels, np.maximum(np.array([r.conversion for r in reads]) - late, 0) % truth.shape[1]]
 
     def glitch_figures(self):
         """The injected ADC glitches of a one-input filter's run, counted where they go: in the
         reads; in the pre-filter's words (its bit-accurate model on the same reads: the estimates
         equal the model chain's, so these are the hardware's); and in the estimates, those further
-        than ``bound`` (the pre-filter's threshold, or the 53H default) from the truth."""
-        from kfpga.model.tukey53h import DELAY, Tukey53HParams
-
+        than ``bound`` (the pre-filter's own, or :data:`GLITCH_BOUND`) from the truth."""
         glitches = getattr(self.source, "glitches", {})
         ups = self.updates()
         n = min(len(self.outputs), len(ups))
@@ -223,7 +225,8 @@ class SystemRecords:
             return {}
         reads = ups[:n]
         hits = np.array([glitches.get(r.conversion, (None,))[0] == r.channel for r in reads])
-        bound = self.prefilter.params.threshold if self.prefilter is not None else Tukey53HParams().threshold
+        pre = None if self.prefilter is None else self.prefilter.spec.prefilter
+        bound = pre.bound(self.prefilter.params) if pre is not None else GLITCH_BOUND
         out = {"glitches_injected": len(glitches), "glitches_in_reads": int(hits.sum()), "glitch_bound": bound}
         channels = np.array([r.channel for r in reads])
         clean = np.array([self.source.codes[r.channel, r.conversion % self.source.codes.shape[1]] for r in reads])
@@ -233,8 +236,9 @@ class SystemRecords:
             left = 0
             for ch in np.unique(channels):
                 idx = np.flatnonzero(channels == ch)
-                # word j of a channel decides its read j - 4
-                left += int(np.sum(np.abs(words[idx][DELAY:] - clean[idx][:-DELAY]) > bound)) if len(idx) > DELAY else 0
+                # word j of a channel decides its read j - delay
+                delay = pre.delay
+                left += int(np.sum(np.abs(words[idx][delay:] - clean[idx][:-delay]) > bound)) if len(idx) > delay else 0
             out["glitches_after_prefilter"] = left
         t = self._truth_of(reads, channels)
         if t is not None:

@@ -17,16 +17,17 @@ from simulators import need
 
 from kfpga.core.config import ConfigError, FilterConfig
 from kfpga.core.fixedmodel import FixedModel
-from kfpga.hw.alphabeta import MAX_TRACKS, AlphaBetaCore, TrackerCore, tracker_m4k_blocks
+from kfpga.hw.alphabeta import SteadyCore, TrackerCore, tracker_m4k_blocks
 from kfpga.hw.storage import m4k_blocks
 from kfpga.model import alphabeta as ab
+from kfpga.model.alphabeta import MAX_TRACKS
 from kfpga.model.reference import KalmanParams, steady_state, steady_state_gain
 from kfpga.sim.amaranth_streams import run_stream, run_with_deadline
 from kfpga.sim.runner import SIMULATORS, build, run
 from kfpga.sim.scoreboard import Scoreboard
 from kfpga.sim.sources import stress_codes
 
-CONFIG = FilterConfig(filter="alpha-beta")
+CONFIG = FilterConfig(filter="alphabeta")
 
 
 # -- parameters -------------------------------------------------------------------------------
@@ -49,7 +50,7 @@ def test_bad_parameters_are_refused_naming_them(kwargs, message):
 
 def test_bad_parameter_in_a_config_names_the_key():
     with pytest.raises(ConfigError, match=re.escape("model.beta must be in (0, 4 - 2*alpha) = (0, 2.6)")):
-        FilterConfig.from_dict({"filter": {"name": "alpha-beta"}, "model": {"alpha": 0.7, "beta": 2.6}})
+        FilterConfig.from_dict({"filter": {"name": "alphabeta"}, "model": {"alpha": 0.7, "beta": 2.6}})
 
 
 def test_stability_region_is_the_loops_poles_inside_the_unit_circle(seed):
@@ -91,7 +92,7 @@ def test_alpha_beta_with_the_kalman_gain_is_the_steady_state_kalman_filter(param
     """alpha = K1, beta = T K2: the same integers sample for sample (x and x1, v and x2), and
     the same float filter, with the Kalman filter's formats."""
     kalman = FilterConfig(params=params)
-    track = FilterConfig(filter="alpha-beta", params=ab.from_kalman(params),
+    track = FilterConfig(filter="alphabeta", params=ab.from_kalman(params),
                          formats={n: f for n, f in kalman.formats.items() if n in ab.POINTS}, check_ranges=False)
     y = stress_codes(seed, 3000)
     a = FixedModel(kalman, variant="steady").run(y)
@@ -252,7 +253,7 @@ def test_alpha_beta_core_states_in_memory_bit_exact(seed):
     rng = np.random.default_rng(seed)
     y = stress_codes(seed, 1200)
     ch = rng.integers(0, 16, len(y))
-    dut = AlphaBetaCore(CONFIG, channels=16)
+    dut = SteadyCore(CONFIG, channels=16)
     out = run_stream(dut, [{"channel": int(c), "z": int(v)} for c, v in zip(ch, y, strict=True)], seed=seed,
                      p_idle=0.3, p_ready=0.6, extra_cycles=30)
     board = Scoreboard(CONFIG, "steady")
@@ -290,7 +291,7 @@ def test_operation_counts_are_the_equations():
     from kfpga.core.ops import update_cost
 
     none = {"square roots": 0, "comparisons": 0, "selections": 0}
-    assert update_cost(FilterConfig(filter="alpha-beta", params=ab.AlphaBetaParams(alpha=0.4, beta=0.1)), "steady") == \
+    assert update_cost(FilterConfig(filter="alphabeta", params=ab.AlphaBetaParams(alpha=0.4, beta=0.1)), "steady") == \
         {"additions": 4, "multiplications": 2, "shifts": 0, "divisions": 0, **none}
     assert update_cost(CONFIG, "steady") == {"additions": 4, "multiplications": 0, "shifts": 2, "divisions": 0, **none}
     assert update_cost(FilterConfig(), "full") == {"additions": 15, "multiplications": 6, "shifts": 0, "divisions": 2, **none}
@@ -302,7 +303,7 @@ def test_evaluate_alpha_beta_cli(tmp_path, capsys, seed):
     from kfpga.cli import main
 
     plot = tmp_path / "ab.png"
-    assert main(["evaluate", "alpha-beta", "--targets", "3", "--seed", str(seed % 1000), "--json",
+    assert main(["evaluate", "alphabeta", "--targets", "3", "--seed", str(seed % 1000), "--json",
                  "--plot", str(plot)]) == 0
     out = json.loads(capsys.readouterr().out)
     rows = {r["filter"]: r for r in out["rows"]}
@@ -320,7 +321,7 @@ def test_evaluate_alpha_beta_cli(tmp_path, capsys, seed):
 
 
 @pytest.mark.parametrize(("args", "message"), [
-    (["--targets", "0"], "argument --targets: must be an integer 1..256, not '0'"),
+    (["--targets", "0"], "--targets must be 1..256 (the tracker's limit), not 0"),
     (["--targets", "257"], "--targets must be 1..256 (the tracker's limit), not 257"),
     (["--seed", "x"], "argument --seed: must be an integer >= 0, not 'x'"),
     (["--plot", "nowhere/ab.png"], "--plot nowhere/ab.png: the folder nowhere does not exist"),
@@ -330,7 +331,7 @@ def test_evaluate_alpha_beta_bad_input(args, message, capsys, tmp_path, monkeypa
 
     monkeypatch.chdir(tmp_path)
     try:
-        code = main(["evaluate", "alpha-beta", *args])
+        code = main(["evaluate", "alphabeta", *args])
     except SystemExit as exc:
         code = exc.code
     err = capsys.readouterr().err.strip().splitlines()[-1]
@@ -348,7 +349,7 @@ def test_filter_tracks_replay_matches_the_tracker(tmp_path, capsys, seed):
     words = _track_words(rng, 400, 5, repeats=True)
     src = tmp_path / "plots.csv"
     src.write_text("track,axis,z\n" + "".join(f"{w['track']},{w['axis']},{w['z']}\n" for w in words))
-    assert main(["filter", "--filter", "alpha-beta", "--tracks", "5", "--input", str(src),
+    assert main(["filter", "--filter", "alphabeta", "--tracks", "5", "--input", str(src),
                  "--output", str(tmp_path / "out.csv")]) == 0
     rows = list(csv.DictReader((tmp_path / "out.csv").open()))
     out = run_stream(TrackerCore(CONFIG, tracks=5), words, seed=seed, extra_cycles=20)
@@ -371,7 +372,7 @@ def test_filter_tracks_bad_input(text, args, message, tmp_path, capsys):
     src = tmp_path / "plots.csv"
     src.write_text(text)
     out = tmp_path / "out.csv"
-    assert main(["filter", "--filter", "alpha-beta", *args, "--input", str(src), "--output", str(out)]) == 2
+    assert main(["filter", "--filter", "alphabeta", *args, "--input", str(src), "--output", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.endswith(message) and len(err.splitlines()) == 1, err
     assert not out.exists()
@@ -383,4 +384,4 @@ def test_filter_tracks_needs_the_alpha_beta_filter(tmp_path, capsys):
     src = tmp_path / "plots.csv"
     src.write_text("track,axis,y\n0,0,1\n")
     assert main(["filter", "--tracks", "2", "--input", str(src), "--output", str(tmp_path / "o.csv")]) == 2
-    assert "--tracks applies to the alpha-beta filter (its many-track core), not to kalman2" in capsys.readouterr().err
+    assert "--tracks applies to the alphabeta filter, not to kalman2" in capsys.readouterr().err

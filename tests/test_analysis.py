@@ -53,7 +53,7 @@ def test_limit_cycle_of_coarse_formats_matches_the_hand_filter():
 
 def test_an_exact_filter_has_no_limit_cycle():
     # alpha = beta = 0.5: every product is a shift, and with enough fraction bits nothing rounds
-    name, params = registry.preset("alpha-beta")
+    name, params = registry.preset("cv2-fixed-gain")
     config = FilterConfig(filter=name, params=params)
     lc = limit_cycles(config, "steady")
     assert lc["limit_cycle_lsb"] == 0.0 and lc["dead_band_lsb"] < 1e-6

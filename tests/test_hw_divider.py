@@ -8,7 +8,7 @@ from amaranth.sim import Simulator
 
 from kfpga.core.config import FilterConfig
 from kfpga.hw.divider import Divider
-from kfpga.hw.kalman2 import FullKalman
+from kfpga.hw.kalman2 import FullCore
 from kfpga.sim.amaranth_streams import run_with_deadline
 
 
@@ -58,7 +58,7 @@ def test_divider_exhaustive_small(dividend_bits, divisor_bits, quotient_bits, se
 
 
 def test_divider_random_at_the_kalman_widths(seed):
-    core = FullKalman(FilterConfig())
+    core = FullCore(FilterConfig())
     n = core.quotient_bits
     dividend_bits = core.dividend_bits
     divisor_bits = FilterConfig().formats["s"].width

@@ -18,7 +18,7 @@ from test_golden import GOLDEN, golden_config
 from kfpga.core.config import FilterConfig
 from kfpga.core.fixed import QFormat
 from kfpga.core.fixedmodel import FixedModel
-from kfpga.hw.kalman2 import SteadyKalman, make_core
+from kfpga.hw.kalman2 import SteadyCore, make_core
 from kfpga.model.reference import KalmanParams
 from kfpga.sim.amaranth_streams import measure_timing, run_core, run_with_deadline
 from kfpga.sim.sources import stress_codes
@@ -136,9 +136,9 @@ def test_latency_with_the_rate_steps(variant, name):
 
 def test_core_rejects_bad_channel_count():
     with pytest.raises(ValueError, match="^" + re.escape("channels must be an integer 1..8, not 9") + "$"):
-        SteadyKalman(FilterConfig(), channels=9)
+        SteadyCore(FilterConfig(), channels=9)
     with pytest.raises(TypeError, match="^" + re.escape("channels must be an integer, not '6'") + "$"):
-        SteadyKalman(FilterConfig(), channels="6")
+        SteadyCore(FilterConfig(), channels="6")
 
 
 @pytest.fixture(params=["steady", "full"])

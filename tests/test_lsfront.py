@@ -62,7 +62,7 @@ def test_bad_parameters(kwargs, match):
 
 def test_evaluate_ls_frontend_cli(tmp_path, capsys, seed):
     plot = tmp_path / "ls.png"
-    assert main(["evaluate", "ls-frontend", "--seed", str(seed), "--json", "--plot", str(plot)]) == 0
+    assert main(["evaluate", "lsfront", "--seed", str(seed), "--json", "--plot", str(plot)]) == 0
     result = json.loads(capsys.readouterr().out)
     assert plot.stat().st_size > 10000
     rows = {r["filter"]: r for r in result["rows"]}
@@ -80,7 +80,7 @@ def test_evaluate_ls_frontend_cli(tmp_path, capsys, seed):
 def _fixed(params=None, **formats):
     from kfpga.core.config import FilterConfig
 
-    return FilterConfig(filter="ls-frontend", params=params or ls.LSFrontParams(), formats=formats)
+    return FilterConfig(filter="lsfront", params=params or ls.LSFrontParams(), formats=formats)
 
 
 def _speed_log(rng, n, params):
@@ -148,8 +148,7 @@ def test_mode_gains_are_scipys_riccati_solution():
     params = ls.LSFrontParams()
     gains = ls.mode_gains(params)
     for mode, gain in gains.items():
-        model = ls.code_model(params, 1 if mode == 0 else 2, mode or None)
-        f, gqg, h, r = model.arrays()
+        f, gqg, h, r = ls.code_model(params, 1 if mode == 0 else 2, mode or None)
         p = solve_discrete_are(f.T, h.T, gqg, r)
         k = p @ h.T @ np.linalg.inv(h @ p @ h.T + r)
         np.testing.assert_allclose(gain[:, :k.shape[1]], k, rtol=1e-7, atol=1e-12)
@@ -198,7 +197,7 @@ def test_core_is_bit_exact_through_a_deceleration(simulator, seed):
     cruise, the deceleration, the stop), with random valid/ready: the raw velocity at the start
     (m = 1) and every window of the table are used, and every output is the model's."""
     from kfpga.core.fixedmodel import FixedModel
-    from kfpga.flows.evaluation import DecelerationScenario, deceleration_log
+    from kfpga.model.evaluations.lsfront import DecelerationScenario, deceleration_log
     from kfpga.model.scenarios import adc_codes
 
     config = _fixed()

@@ -17,12 +17,12 @@ from filterpy.kalman import KalmanFilter
 
 from kfpga.core import registry
 from kfpga.core.config import ConfigError, FilterConfig
+from kfpga.core.csvio import read_samples
 from kfpga.core.errors import InputError
 from kfpga.core.fixed import QFormat
 from kfpga.core.fixedmodel import FixedModel
 from kfpga.core.ops import FloatOps
 from kfpga.flows.analysis import compare
-from kfpga.flows.csvio import read_samples
 from kfpga.model.kalman import SPEC, StateSpaceParams, dare_gain, reference
 from kfpga.model.scenarios import for_config
 

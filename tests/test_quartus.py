@@ -239,7 +239,7 @@ def test_ecp5_place_and_route_agrees_the_loop_is_short(capsys):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("name", "mul18", "words"), [("roll", 4, 64 * 54), ("ls-frontend", 2, 256 * 58)])
+@pytest.mark.parametrize(("name", "mul18", "words"), [("roll", 4, 64 * 54), ("lsfront", 2, 256 * 58)])
 def test_the_sequential_cores_meet_their_goals(capsys, name, mul18, words):
     """The square-root roll predictor and the least-squares front end on the sequential core:
     within one 50 MHz cycle on the -8 part (their goal: an update every half second or every

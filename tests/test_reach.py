@@ -13,7 +13,7 @@ from amaranth.lib.wiring import In, Out
 
 from kfpga.core.config import FilterConfig
 from kfpga.core.fixedmodel import FixedModel
-from kfpga.hw.kalman2 import FullKalman
+from kfpga.hw.kalman2 import FullCore
 from kfpga.verify import reach
 from kfpga.verify.formal import warm, yosys
 
@@ -39,7 +39,7 @@ def test_the_evaluation_steps_the_covariance_as_the_model_does(tmp_path):
     products, the restoring dividers, saturation), equal the bit-accurate model's after each of
     30 updates."""
     config = FilterConfig()
-    core = FullKalman(config)
+    core = FullCore(config)
     program = reach.compile_pair(_pair(tmp_path, core), {"i__payload": list(range(1, 17))})
     go = program.inputs(i__valid=1, o__ready=1)
     model = FixedModel(config, variant="full")

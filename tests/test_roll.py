@@ -122,7 +122,7 @@ def test_evaluate_roll_cli_errors(tmp_path, capsys):
 
 
 def test_read_series_header_is_optional(tmp_path):
-    from kfpga.flows.csvio import read_series
+    from kfpga.core.csvio import read_series
 
     path = tmp_path / "s.csv"
     path.write_text("# deg\nt,roll\n0,1.5\n0.5,-2\n")

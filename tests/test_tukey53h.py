@@ -18,7 +18,7 @@ from kfpga.core.ops import CostOps, IntOps
 from kfpga.model import tukey53h as th
 from kfpga.sim.amaranth_streams import measure_timing, run_core
 
-CONFIG = FilterConfig(filter="53h")
+CONFIG = FilterConfig(filter="tukey53h")
 
 
 def definition(x, threshold):
@@ -50,7 +50,7 @@ def test_model_equals_the_definition_in_the_interior(seed):
     rng = np.random.default_rng(seed)
     for threshold in (0.5, 40.0, 500.0, 7000.0):
         x = glitchy(rng, 400)
-        y = FixedModel(FilterConfig(filter="53h", params=th.Tukey53HParams(threshold=threshold))).run(x).y
+        y = FixedModel(FilterConfig(filter="tukey53h", params=th.Tukey53HParams(threshold=threshold))).run(x).y
         want = definition([int(v) for v in x], threshold)
         got = {c: int(y[c + th.DELAY]) for c in want}  # the output for input c + 4 decides sample c
         assert got == want, f"threshold {threshold}"
@@ -92,7 +92,7 @@ def test_default_formats_cannot_overflow():
 def test_narrow_formats_saturate_and_flag():
     from kfpga.core.fixed import QFormat
 
-    config = FilterConfig(filter="53h", formats={"x": QFormat(12, 0)}, check_ranges=False)
+    config = FilterConfig(filter="tukey53h", formats={"x": QFormat(12, 0)}, check_ranges=False)
     res = FixedModel(config).run(np.array([100, 5000, -5000, 100], dtype=np.int64))
     assert res.overflow[1] and res.overflow[2] and not res.overflow[0]
 
@@ -196,7 +196,7 @@ def test_prefilter_removes_adc_glitches_bit_exact(simulator, six, seed):
     from kfpga.sim import system
 
     need(simulator)
-    pre = FilterConfig(filter="53h")
+    pre = FilterConfig(filter="tukey53h")
     samples = 1800 if simulator == "verilator" else 600
     params = {"seed": seed, "glitch": True, "glitches": 6}
     built = system.build(simulator, config=FilterConfig(), six=six, prefilter=pre)
@@ -213,11 +213,11 @@ def test_prefilter_that_could_overflow_is_refused():
     from kfpga.core.fixed import QFormat
     from kfpga.hw.top import FilterSystem
 
-    narrow = FilterConfig(filter="53h", formats={"x": QFormat(12, 0)}, check_ranges=False)
+    narrow = FilterConfig(filter="tukey53h", formats={"x": QFormat(12, 0)}, check_ranges=False)
     with pytest.raises(ValueError, match="can overflow"):
         FilterSystem(FilterConfig(), prefilter=narrow)
     with pytest.raises(ValueError, match="pre-filter must be one of 53h"):
-        FilterSystem(FilterConfig(), prefilter=FilterConfig(filter="alpha-beta"))
+        FilterSystem(FilterConfig(), prefilter=FilterConfig(filter="alphabeta"))
 
 
 def test_scoreboard_models_the_chain():
@@ -237,7 +237,7 @@ def test_scoreboard_models_the_chain():
 def test_baselines_against_their_definitions(seed):
     from scipy.signal import savgol_filter
 
-    from kfpga.flows.evaluation import cubic_smoothing, sliding_wls
+    from kfpga.model.evaluations.tukey53h import cubic_smoothing, sliding_wls
 
     rng = np.random.default_rng(seed)
     x = rng.normal(0, 10, 60).cumsum()
@@ -252,7 +252,7 @@ def test_baselines_against_their_definitions(seed):
 
 def test_evaluate_53h_cli(tmp_path, capsys, seed):
     plot = tmp_path / "nav.png"
-    assert main(["evaluate", "53h", "--seed", str(seed), "--json", "--plot", str(plot)]) == 0
+    assert main(["evaluate", "tukey53h", "--seed", str(seed), "--json", "--plot", str(plot)]) == 0
     result = json.loads(capsys.readouterr().out)
     assert plot.stat().st_size > 10000
     rows = {(r["signal"], r["method"]): r for r in result["rows"]}
@@ -271,25 +271,25 @@ def test_filter_offline_cli(tmp_path, capsys):
     x[[0, 20, 39]] += 3000
     src.write_text("y\n" + "\n".join(map(str, x)) + "\n")
     out = tmp_path / "out.csv"
-    assert main(["filter", "--filter", "53h", "--input", str(src), "--output", str(out), "--offline"]) == 0
+    assert main(["filter", "--filter", "tukey53h", "--input", str(src), "--output", str(out), "--offline"]) == 0
     y = np.loadtxt(out, delimiter=",", skiprows=1)[:, 0]
     assert len(y) == 40 and np.all(np.abs(y[[0, 20, 39]]) < 300) and y[10] == x[10]
     short = tmp_path / "short.csv"
     short.write_text("y\n1\n2\n3\n")
     capsys.readouterr()
-    assert main(["filter", "--filter", "53h", "--input", str(short), "--output", str(out), "--offline"]) == 2
+    assert main(["filter", "--filter", "tukey53h", "--input", str(short), "--output", str(out), "--offline"]) == 2
     assert "needs at least 16" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(("argv", "message"), [
-    (["filter", "--input", "x.csv", "--output", "o.csv", "--offline"], "--offline applies to the 53h filter"),
+    (["filter", "--input", "x.csv", "--output", "o.csv", "--offline"], "--offline applies to the tukey53h filter"),
     (["generate", "--out", "g", "--threshold", "5"], "--threshold applies with --prefilter 53h only"),
-    (["generate", "--out", "g", "--prefilter", "53h", "--threshold", "0"], "threshold must be > 0"),
-    (["compare", "--prefilter", "53h", "--filter", "kalman", "--preset", "va2"], "one-input filter"),
-    (["compare", "--prefilter", "53h", "--plot", "p.png"], "--plot does not apply with --prefilter"),
-    (["sweep", "--filter", "53h"], "sweep does not apply to the 53h filter"),
-    (["propose", "--filter", "53h"], "propose does not apply to the 53h filter"),
-    (["simulate", "--prefilter", "53h", "--adc-model", "python"], "--prefilter runs with --adc-model verilog"),
+    (["generate", "--out", "g", "--prefilter", "tukey53h", "--threshold", "0"], "threshold must be > 0"),
+    (["compare", "--prefilter", "tukey53h", "--filter", "kalman", "--preset", "va2"], "one-input filter"),
+    (["compare", "--prefilter", "tukey53h", "--plot", "p.png"], "--plot does not apply with --prefilter"),
+    (["sweep", "--filter", "tukey53h"], "sweep does not apply to the tukey53h filter"),
+    (["propose", "--filter", "tukey53h"], "propose does not apply to the tukey53h filter"),
+    (["simulate", "--prefilter", "tukey53h", "--adc-model", "python"], "--prefilter runs with --adc-model verilog"),
     (["simulate", "--glitches", "0"], "--glitches must be a positive integer"),
 ])
 def test_cli_errors(argv, message, tmp_path, capsys, monkeypatch):
@@ -302,7 +302,7 @@ def test_cli_errors(argv, message, tmp_path, capsys, monkeypatch):
 
 
 def test_compare_prefilter_cli(capsys, seed):
-    assert main(["compare", "--prefilter", "53h", "--seed", str(seed), "--samples", "4000", "--json"]) == 0
+    assert main(["compare", "--prefilter", "tukey53h", "--seed", str(seed), "--samples", "4000", "--json"]) == 0
     m = json.loads(capsys.readouterr().out)
     assert m["glitches"] > 5 and m["replaced"] >= m["glitches"]
     assert m["with_prefilter"]["rmse_fixed"] < 3.0 < 100 < m["without_prefilter"]["rmse_fixed"]

@@ -8,16 +8,19 @@ from __future__ import annotations
 
 import importlib
 
-__all__ = ["FILTERS", "DEFAULT", "get", "names", "specs", "spec_for", "register", "presets", "preset"]
+__all__ = ["FILTERS", "DEFAULT", "get", "names", "specs", "spec_for", "register", "unregister", "aliases",
+           "canonical", "presets", "preset"]
 
-#: ``name -> module`` whose ``SPEC`` is the filter's :class:`~kfpga.core.spec.FilterSpec`; imported on use.
+#: ``name -> module`` whose ``SPEC`` is the filter's :class:`~kfpga.core.spec.FilterSpec`; imported on
+#: use. The name is the stem of the filter's files in every layer (``model/NAME.py``, ``hw/NAME.py``,
+#: its tests); a spec's ``aliases`` are the other spellings users type.
 FILTERS = {
     "kalman2": "kfpga.model.kalman2",
     "kalman": "kfpga.model.kalman",
-    "alpha-beta": "kfpga.model.alphabeta",
-    "53h": "kfpga.model.tukey53h",
+    "alphabeta": "kfpga.model.alphabeta",
+    "tukey53h": "kfpga.model.tukey53h",
     "roll": "kfpga.model.roll",
-    "ls-frontend": "kfpga.model.lsfront",
+    "lsfront": "kfpga.model.lsfront",
 }
 #: The paper's filter, used when a config or command names none.
 DEFAULT = "kalman2"
@@ -26,21 +29,46 @@ _loaded = {}
 
 
 def register(spec):
-    """Add a filter at run time (a user's own spec); its name must be new."""
-    if spec.name in FILTERS or spec.name in _loaded:
-        raise ValueError(f"a filter named {spec.name!r} is already registered")
+    """Add a filter at run time (a user's own spec); its name and aliases must be new."""
+    taken = set(names()) | set(aliases())
+    for name in (spec.name, *spec.aliases):
+        if name in taken:
+            raise ValueError(f"a filter named {name!r} is already registered")
     _loaded[spec.name] = spec
 
 
+def unregister(name):
+    """Remove a filter added with :func:`register` (the registry's own filters stay)."""
+    if name in FILTERS:
+        raise ValueError(f"{name!r} is one of the registry's own filters")
+    _loaded.pop(name, None)
+
+
+def _load(name):
+    if name not in _loaded:
+        _loaded[name] = importlib.import_module(FILTERS[name]).SPEC
+    return _loaded[name]
+
+
+def aliases():
+    """``{alias: name}`` of every registered filter."""
+    return {alias: spec.name for spec in specs() for alias in spec.aliases}
+
+
+def canonical(name):
+    """The registered name of ``name`` (itself, or the filter it is an alias of); ``KeyError``."""
+    if name in _loaded or name in FILTERS:
+        return name
+    known = aliases()
+    if name in known:
+        return known[name]
+    raise KeyError(f"no filter named {name!r}; registered: {', '.join(names())}")
+
+
 def get(name):
-    """The :class:`~kfpga.core.spec.FilterSpec` named ``name``; ``KeyError`` with the known names."""
-    if name in _loaded:
-        return _loaded[name]
-    if name not in FILTERS:
-        raise KeyError(f"no filter named {name!r}; registered: {', '.join(names())}")
-    spec = importlib.import_module(FILTERS[name]).SPEC
-    _loaded[name] = spec
-    return spec
+    """The :class:`~kfpga.core.spec.FilterSpec` named ``name`` (or one of its aliases); ``KeyError``
+    with the known names."""
+    return _load(canonical(name))
 
 
 def names():
@@ -48,7 +76,7 @@ def names():
 
 
 def specs():
-    return [get(n) for n in names()]
+    return [_load(n) for n in names()]
 
 
 def spec_for(params, filter=None):

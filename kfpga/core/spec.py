@@ -14,7 +14,17 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import NamedTuple
 
-__all__ = ["Point", "Output", "Variant", "FilterSpec", "Constant"]
+__all__ = ["Point", "Output", "Variant", "FilterSpec", "Constant", "Evaluation", "Mode", "Prefilter", "MutationBlock",
+           "resolve"]
+
+
+def resolve(target):
+    """``target`` itself, or the object a ``"module:attribute"`` string names (imported on first use,
+    so that a layer below never imports the one that holds it)."""
+    if not isinstance(target, str):
+        return target
+    module, _, attribute = target.partition(":")
+    return getattr(importlib.import_module(module), attribute)
 
 
 class Constant(NamedTuple):
@@ -126,13 +136,118 @@ class Variant:
 
 
 @dataclass(frozen=True)
+class Evaluation:
+    """A filter's evaluation of its source document: ``kfpga evaluate NAME``.
+
+    Parameters
+    ----------
+    summary, description:
+        A line for the list of evaluations, and the paragraph of its ``--help``.
+    add_arguments:
+        ``add_arguments(parser)``: its own options (the command adds ``--seed``, ``--json`` and
+        ``--plot`` to every evaluation).
+    run:
+        ``run(options, seed) -> result``: a dict; ``options`` the parsed arguments. A bad option
+        raises :class:`~kfpga.core.errors.UsageError` (or ``InputError`` for a file).
+    table:
+        ``table(result) -> str``: the report.
+    summary_json:
+        ``summary_json(result) -> dict``: what ``--json`` prints.
+    plot:
+        ``plot(result, path)``: its figures; ``None`` if it has none.
+    seeded:
+        ``seeded(options) -> bool``: whether a run with these options draws random numbers
+        (a run on a file may not); by default always.
+    """
+
+    summary: str
+    description: str
+    add_arguments: Callable
+    run: Callable
+    table: Callable
+    summary_json: Callable
+    plot: Callable | None = None
+    seeded: Callable = field(default=lambda options: True)
+
+
+@dataclass(frozen=True)
+class Mode:
+    """A form of ``kfpga filter`` that only this filter has, chosen by its own option.
+
+    Parameters
+    ----------
+    option:
+        The option (``--tracks``), added to ``kfpga filter`` with ``argument`` (argparse keywords);
+        given for another filter it is refused.
+    columns:
+        ``columns(config, value) -> names``: the CSV columns it reads.
+    run:
+        ``run(config, variant, samples, value, *, exact, source) -> (columns, note)``: ``samples``
+        ``{column: array}``; ``exact``: the bit-accurate model (else float); ``source``: the file's
+        name for messages. Returns the output columns and a line for the report.
+    """
+
+    option: str
+    argument: Mapping
+    columns: Callable
+    run: Callable
+
+    @property
+    def dest(self):
+        return self.option.lstrip("-").replace("-", "_")
+
+
+@dataclass(frozen=True)
+class Prefilter:
+    """How a filter stands before another on the board, between the ADC controller and the core.
+
+    Parameters
+    ----------
+    summary:
+        What it does there (the help of ``--prefilter``).
+    delay:
+        Samples its output is late (the core's estimate of sample ``n`` comes ``delay`` later).
+    options:
+        ``{option: argparse keywords}``: its own options on the commands that take ``--prefilter``.
+    params:
+        ``params(values) -> its parameters`` from ``{option dest: value}`` (``None`` for an option
+        not given); raises ``ValueError`` or ``TypeError`` for a bad value.
+    bound:
+        ``bound(params) -> codes``: the largest step it passes unchanged (glitches beyond it are
+        replaced), the yardstick of the glitch counts.
+    """
+
+    summary: str
+    delay: int
+    options: Mapping
+    params: Callable
+    bound: Callable
+
+
+@dataclass(frozen=True)
+class MutationBlock:
+    """A core of this filter for ``make mutate``: a config on the core bench.
+
+    ``signal``: the bench's stimulus parameters (``samples``, or ``codes`` and ``order``);
+    ``channels``: the core's channel states."""
+
+    label: str
+    config: object
+    variant: str
+    signal: Mapping
+    channels: int = 1
+    make: Callable | None = None  # make() -> the core; default: the spec's core of ``config``
+
+
+@dataclass(frozen=True)
 class FilterSpec:
     """A registered filter (see ``kfpga/core/registry.py`` and the README's "Add a filter").
 
     Parameters
     ----------
     name, summary, source:
-        ``--filter`` name, one line for ``kfpga filters``, the document it comes from.
+        ``--filter`` name (the stem of its files in every layer), one line for ``kfpga filters``,
+        the document it comes from.
     params:
         Its parameters: a keyword-only dataclass that validates itself (``TypeError`` for a
         wrong type, ``ValueError`` for a wrong value). The defaults are the source's.
@@ -182,6 +297,17 @@ class FilterSpec:
     error_std:
         ``error_std(params) -> {output: std}``: the float filter's steady-state error of each
         output (input units), the yardstick of the outputs no truth comes with (``propose``).
+    aliases:
+        Other names users type for it (``--filter``, ``[filter] name``, ``kfpga evaluate``).
+    evaluation:
+        Its source document's evaluation: an :class:`Evaluation`, or ``"module:attribute"`` naming
+        one (imported when ``kfpga evaluate`` is run); ``None``: it has none.
+    modes:
+        Its extra forms of ``kfpga filter`` (:class:`Mode`).
+    prefilter:
+        A :class:`Prefilter` if it can stand before another filter on the board.
+    mutation:
+        ``mutation() -> [MutationBlock, ...]``: its cores for ``make mutate``.
     formal_config:
         ``formal_config() -> FilterConfig``: a narrow instance for the formal stream-contract
         checks (``make formal``), for a core whose default datapath is too wide for the solver at
@@ -212,6 +338,11 @@ class FilterSpec:
     adc: Callable | None = None
     error_std: Callable | None = None
     formal_config: Callable | None = None
+    aliases: tuple = ()
+    evaluation: object = None
+    modes: tuple = ()
+    prefilter: Prefilter | None = None
+    mutation: Callable | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "points", MappingProxyType(dict(self.points)))
@@ -262,5 +393,8 @@ class FilterSpec:
     def make_core(self, config, variant, *, channels=1, **options):
         """The Amaranth core of ``variant`` (imports the RTL module on first use); ``options``
         go to the filter's core (``stages=L`` for a steady-state loop)."""
-        module, _, function = self.core.partition(":")
-        return getattr(importlib.import_module(module), function)(config, variant, channels=channels, **options)
+        return resolve(self.core)(config, variant, channels=channels, **options)
+
+    def load_evaluation(self):
+        """Its :class:`Evaluation`, or ``None``."""
+        return None if self.evaluation is None else resolve(self.evaluation)

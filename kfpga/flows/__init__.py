@@ -1,2 +1,1 @@
-"""What users run: fixed-vs-float analysis, word-length proposals, CSV input and output, the
-Quartus project writer."""
+"""What users run: fixed-vs-float analysis, word-length proposals, the Quartus project writer."""

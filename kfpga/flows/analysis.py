@@ -10,6 +10,7 @@ import numpy as np
 from kfpga.core.config import FilterConfig, analysed_ranges, default_formats
 from kfpga.core.fixedmodel import FixedModel
 from kfpga.core.formats import MAX_OPERAND_BITS
+from kfpga.core.plots import pyplot
 
 __all__ = ["sample_count", "rmse", "sqnr_db", "float_run", "Comparison", "compare", "limit_cycles", "sweep",
            "precision_warnings",
@@ -219,16 +220,6 @@ def sweep(params, variant, y, truth, widths, *, settle=None, range_source="scena
             break
         narrowest = r["bits"]
     return rows, narrowest
-
-
-def pyplot():
-    """matplotlib's pyplot on the Agg backend (files, no display)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def plot_compare(cmp_, path, title=""):

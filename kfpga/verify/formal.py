@@ -52,12 +52,12 @@ class Job:
 
 
 def divider_widths():
-    """The time-varying core's divider widths (``dividend_bits``, ``divisor_bits``,
+    """The paper's time-varying core's divider widths (``dividend_bits``, ``divisor_bits``,
     ``quotient_bits``) for the default configuration."""
     from kfpga.core.config import FilterConfig
-    from kfpga.hw.kalman2 import FullKalman
 
-    return figures_only(FullKalman(FilterConfig()))._divider_args
+    config = FilterConfig()
+    return figures_only(config.spec.make_core(config, "full"))._divider_args
 
 
 def _cores():

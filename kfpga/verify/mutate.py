@@ -38,6 +38,7 @@ from pathlib import Path
 
 from amaranth.back import rtlil
 
+from kfpga.core import registry
 from kfpga.hw.generate import figures_only, plain_module_names
 from kfpga.verify.formal import divider_widths, warm
 
@@ -70,54 +71,30 @@ class Block:
 
 
 def blocks():
-    import numpy as np
 
     from kfpga.core.config import FilterConfig
-    from kfpga.core.fixed import QFormat
     from kfpga.hw.clockdiv import ClockDivider
     from kfpga.hw.divider import Divider
     from kfpga.hw.generate import TOP_NAME
-    from kfpga.hw.kalman2 import FullKalman
     from kfpga.hw.top import AdcFrontend, FilterSystem
-    from kfpga.sim.sources import stress_codes, threshold_codes
 
     config = FilterConfig()
-    # the time-varying core with x1 a bit narrower than its range: the write of x1 then saturates
-    # on its own on some stress samples, so the bench sees that flag reach the estimate by itself
-    narrow = FilterConfig(formats={"x1": QFormat(16, config.formats["x1"].frac_bits)}, check_ranges=False)
     # the time-varying core's divider, at its widths, alone: its own bench drives every kind of
     # operand, where the core's bench reaches few of them
     widths = divider_widths()
-    # the other filters' cores on their core bench; their formal harnesses hold other instances
-    # (the defaults' widths and channels, a narrow 53H, the sequential core's handshake twin),
-    # where this instance's cells are not, so no property kills here
-    # the steady-state cores with the state narrower than its range (x1 and xl1 Q15, v Q12, e Q13
-    # or Q14): at the defaults no stress sample saturates xl1, x1 or v, whose saturation logic no
-    # bench could then reach; so narrowed, each of the four writes saturates, some samples with no
-    # other (its own flag alone on the estimate), in 1,200 stress samples
-    def stressed(filt, e_bits):
-        base = FilterConfig(filter=filt)
-        narrow = {"x1": 15, "xl1": 15, "v": 12, "e": e_bits}
-        return FilterConfig(filter=filt, check_ranges=False,
-                            formats={**base.formats, **{p: QFormat(i, base.formats[p].frac_bits) for p, i in narrow.items()}})
-
-    steady, ab = stressed("kalman2", 13), stressed("alpha-beta", 14)
-    # the 53H core with two channels (its channel pipeline then carries a bit), on stress codes and
-    # spikes at its threshold's boundary, both signs
-    tukey = FilterConfig(filter="53h")
-    boundary = [int(c) for c in np.r_[stress_codes(1, 300), threshold_codes(1, 480, tukey.params.threshold, hold=24)]]
-    others = [(steady, "steady", "steady core", {"samples": 1200}, 1),
-              (ab, "steady", "alpha-beta core", {"samples": 1200}, 1),
-              (tukey, "online", "53h core", {"codes": boundary, "order": "round-robin"}, 2),
-              (FilterConfig(filter="ls-frontend"), "steady", "sequential core (ls-frontend)", {"samples": 120}, 1)]
-    cores = [Block(name, "core", {"variant": variant, "channels": channels, "config": cfg},
-                   (lambda cfg=cfg, variant=variant, c=channels: cfg.spec.make_core(cfg, variant, channels=c)),
-                   "kfpga_core", "", "test_core",
-                   {"variant": variant, **signal, "channels": channels, "p_idle": 0.2, "p_ready": 0.7,
-                    "config_toml": cfg.to_toml(), "check_ranges": cfg.check_ranges}, None, None,
-                   sample_bits(cfg.spec.make_core(cfg, variant, channels=channels)),
-                   channel_bits_tied(cfg.spec.make_core(cfg, variant, channels=channels)))
-             for cfg, variant, name, signal, channels in others]
+    # each filter's cores on the core bench (its spec's ``mutation``); their formal harnesses hold
+    # other instances (the defaults' widths and channels, narrow formats, the sequential core's
+    # handshake twin), where this instance's cells are not, so no property kills here
+    cores = []
+    for spec in registry.specs():
+        for b in spec.mutation() if spec.mutation is not None else ():
+            def make(b=b):
+                return b.make() if b.make is not None else b.config.spec.make_core(b.config, b.variant, channels=b.channels)
+            cores.append(Block(b.label, "core", {"variant": b.variant, "channels": b.channels, "config": b.config}, make,
+                               "kfpga_core", "", "test_core",
+                               {"variant": b.variant, **b.signal, "channels": b.channels, "p_idle": 0.2, "p_ready": 0.7,
+                                "config_toml": b.config.to_toml(), "check_ranges": b.config.check_ranges}, None, None,
+                               sample_bits(make()), channel_bits_tied(make())))
     return [
         Block("clock divider", "divider", {"ratio": 10}, lambda: ClockDivider(ratio=10), "kfpga_divider", "",
               "test_clockdiv", {"ratio": 10}, None, "clock divider /10"),
@@ -127,11 +104,6 @@ def blocks():
         Block("restoring divider", "restoring", widths, lambda: Divider(**widths), "kfpga_restoring", "",
               "test_restoring", {**widths, "samples": 1500, "p_idle": 0.2, "p_ready": 0.7}, None,
               f"divider {widths['dividend_bits']}/{widths['divisor_bits']}->{widths['quotient_bits']}"),
-        Block("full core", "core", {"variant": "full", "channels": 1}, lambda: FullKalman(narrow), "kfpga_core", "",
-              "test_core", {"variant": "full", "samples": 150, "p_idle": 0.2, "p_ready": 0.7,
-                            "config_toml": narrow.to_toml(), "check_ranges": False}, None,
-              # its properties' harness holds the default config
-              None, sample_bits(FullKalman(narrow)), channel_bits_tied(FullKalman(narrow))),
         Block("top level", "top", {"variant": "steady", "channel": 1},
               lambda: FilterSystem(config, variant="steady", channel=1), TOP_NAME, "", "test_top",
               {"variant": "steady", "samples": 60, "channel": 1, "scenario": "stress"},

@@ -1,0 +1,427 @@
+"""What the commands share: argument types, option groups, loading the config, the signal of a
+run, JSON output, and the pre-filter and filter-mode options every registered filter brings."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import secrets
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from kfpga.core import registry
+from kfpga.core.errors import UsageError
+
+EXIT_USAGE = 2
+PLOT_EXTENSIONS = (".png", ".svg", ".pdf")
+
+
+def int_at_least(minimum, what):
+    """An argparse type: an integer >= ``minimum``, described as ``what`` in the error."""
+
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or value < minimum:
+            raise argparse.ArgumentTypeError(f"must be {what}, not {text!r}")
+        return value
+
+    return parse
+
+
+positive_int = int_at_least(1, "a positive integer")
+seed_type = int_at_least(0, "an integer >= 0")
+
+
+def bit_range(text):
+    try:
+        lo, hi = (int(v) for v in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must look like 10:24, not {text!r}") from None
+    if not 4 <= lo <= hi <= 32:
+        raise argparse.ArgumentTypeError(f"needs 4 <= first <= last <= 32, not {text!r}")
+    return list(range(lo, hi + 1))
+
+
+def budget(text):
+    """``--budget``: a share of the float RMSE, written ``1%`` or ``1`` (percent), in (0, 100]."""
+    value = text.strip().removesuffix("%").strip()
+    try:
+        pct = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a percentage like 1% or 0.5%, not {text!r}") from None
+    if not 0 < pct <= 100:
+        raise argparse.ArgumentTypeError(f"must be more than 0 % and at most 100 %, not {text!r}")
+    return pct / 100.0
+
+
+def adc_channel(text):
+    from kfpga.core.ads8364 import CHANNELS
+
+    if text.upper() in CHANNELS:
+        return CHANNELS.index(text.upper())
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= 5:
+        raise argparse.ArgumentTypeError(f"must be 0..5 or one of {', '.join(CHANNELS)}, not {text!r}")
+    return value
+
+
+# -- the config -----------------------------------------------------------------------------------
+
+
+def _filter_name(name):
+    try:
+        return registry.canonical(name)
+    except KeyError:
+        raise UsageError(f"--filter: no filter named {name!r}; registered: {', '.join(registry.names())}") from None
+
+
+def _preset_config(args, preset, name):
+    from kfpga.core.config import FilterConfig
+
+    if args.config:
+        raise UsageError(f"--preset and --config both give the model: use one (to edit the preset, write it with "
+                         f"'kfpga formats --preset {preset} --toml > {preset}.toml' and pass --config {preset}.toml)")
+    known = registry.presets()
+    if preset not in known:
+        raise UsageError(f"--preset: no preset named {preset!r}; presets: {', '.join(known)}")
+    filter_name, params = registry.preset(preset)
+    if name is not None and name != filter_name:
+        raise UsageError(f"--filter {name} does not match --preset {preset}, a model of the {filter_name} filter")
+    return FilterConfig(filter=filter_name, params=params)
+
+
+def load_config(args, *, hardware=False):
+    """The config of ``--config``, ``--preset`` and ``--filter`` (which must agree), with ``--variant``
+    checked (``hardware``: and refused when it has no core for this model)."""
+    from kfpga.core.config import FilterConfig
+
+    name = getattr(args, "filter", None)
+    name = None if name is None else _filter_name(name)
+    preset = getattr(args, "preset", None)
+    if preset is not None:
+        config = _preset_config(args, preset, name)
+    elif args.config:
+        config = FilterConfig.from_toml(args.config)
+        if name is not None and name != config.filter:
+            raise UsageError(f"--filter {name} does not match {args.config}, whose [filter] name is {config.filter!r}")
+    else:
+        config = FilterConfig(filter=name or registry.DEFAULT)
+    if hasattr(args, "variant"):
+        if args.variant is None:
+            args.variant = config.spec.default_variant
+        (config.require_hardware if hardware else config.require_variant)(args.variant)
+    return config
+
+
+def warn_precision(config):
+    """Warnings about output steps coarse against the float filter's noise, on stderr."""
+    from kfpga.flows.analysis import precision_warnings
+
+    for line in precision_warnings(config):
+        print(f"warning: {line}", file=sys.stderr)
+
+
+# -- output ---------------------------------------------------------------------------------------
+
+
+def pick_seed(seed):
+    return secrets.randbelow(2**31) if seed is None else seed
+
+
+def emit_json(obj):
+    def clean(value):
+        if isinstance(value, float) and not math.isfinite(value):
+            return None if math.isnan(value) else ("inf" if value > 0 else "-inf")
+        if isinstance(value, dict):
+            return {k: clean(v) for k, v in value.items()}
+        if isinstance(value, list | tuple):
+            return [clean(v) for v in value]
+        if isinstance(value, np.integer | np.floating):
+            return clean(value.item())
+        return value
+
+    print(json.dumps(clean(obj), indent=2))
+
+
+def info(text):
+    print(text, file=sys.stderr)
+
+
+def check_plot(path, option="--plot"):
+    """``--plot FILE``: an image file matplotlib writes, in a folder that exists."""
+    from kfpga.core.paths import check_output_file
+
+    return None if path is None else str(check_output_file(path, option=option, extensions=PLOT_EXTENSIONS))
+
+
+def not_with(option, other, why):
+    """Refuse ``option`` (given) in combination with ``other``: it would be ignored."""
+    raise UsageError(f"{option} does not apply with {other}: {why}")
+
+
+# -- help texts from the registry -------------------------------------------------------------------
+
+
+def filter_help():
+    aliases = registry.aliases()
+    also = f"; also {', '.join(f'{a} ({n})' for a, n in aliases.items())}" if aliases else ""
+    return f"the filter: {', '.join(registry.names())} (default: {registry.DEFAULT}{also}; see 'kfpga filters')"
+
+
+def variant_help():
+    parts = [f"{s.name}: {', '.join(s.variants)}" for s in registry.specs()]
+    return f"the filter's variant ({'; '.join(parts)}; default: the first)"
+
+
+def out_field_help():
+    parts = [f"{s.name}: {', '.join(o.name for o in s.outputs_for(s.params()))}, default {s.default_output}"
+             for s in registry.specs()]
+    return f"the output field that drives out_data ({'; '.join(parts)}); the pin table follows its width"
+
+
+def preset_help():
+    names = ", ".join(f"{n} ({f})" for n, (f, _) in registry.presets().items())
+    return f"a named model instead of --config: {names}; 'kfpga filters' describes them"
+
+
+# -- option groups ----------------------------------------------------------------------------------
+
+
+def add_filter_args(p, variant=True):
+    p.add_argument("--filter", metavar="NAME", help=filter_help())
+    p.add_argument("--preset", metavar="NAME", help=preset_help())
+    if variant:
+        p.add_argument("--variant", metavar="NAME", help=variant_help())
+
+
+def add_signal_args(p):
+    add_filter_args(p)
+    p.add_argument("--scenario", choices=("sine", "random-accel"),
+                   help="test signal when --input is not given: the paper's sine plus white noise of variance R, "
+                        "or a random-acceleration track (default: sine)")
+    p.add_argument("--input", metavar="CSV", help="use the 'y' column of CSV (and 'truth' if present) instead of a scenario")
+    p.add_argument("--clip", action="store_true", help="with --input: saturate values outside the 16-bit range "
+                                                        "instead of failing")
+    p.add_argument("--samples", type=positive_int, metavar="N",
+                   help="number of samples (default: 20000, or the whole --input; at most its rows)")
+    p.add_argument("--seed", type=seed_type, metavar="S", help="noise seed of a scenario (default: random, printed)")
+    p.add_argument("--config", metavar="TOML", help="model parameters and formats (default: built-in, see 'kfpga formats')")
+    p.add_argument("--settle", type=int, metavar="N", help="samples skipped by the RMSE figures (default: 100)")
+
+
+def add_design_args(p, channels_help):
+    """--filter, --variant, --channels, --config, --prefilter: the arguments of the commands that build hardware."""
+    add_filter_args(p)
+    p.add_argument("--channels", type=int, choices=(1, 6), default=1, help=channels_help)
+    p.add_argument("--config", metavar="TOML", help="model parameters and formats")
+    add_prefilter_args(p)
+
+
+def add_json(p, what="print one JSON object"):
+    p.add_argument("--json", action="store_true", help=what)
+
+
+def add_quiet(p):
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+# -- the pre-filter -----------------------------------------------------------------------------------
+
+
+def _prefilter_specs():
+    return [s for s in registry.specs() if s.prefilter is not None]
+
+
+def add_prefilter_args(p):
+    """``--prefilter NAME`` and each pre-filter's own options (a filter whose spec has ``prefilter``)."""
+    specs = _prefilter_specs()
+    if not specs:
+        return
+    names = [s.name for s in specs] + [a for s in specs for a in s.aliases]
+    p.add_argument("--prefilter", choices=names, metavar="NAME",
+                   help="put a filter between the ADS8364 controller and the core: "
+                        + "; ".join(f"{s.name}: {s.prefilter.summary}" for s in specs))
+    for s in specs:
+        for option, kwargs in s.prefilter.options.items():
+            p.add_argument(option, **{**kwargs, "help": f"with --prefilter {s.name}: {kwargs.get('help', '')}"})
+
+
+def _option_dest(option):
+    return option.lstrip("-").replace("-", "_")
+
+
+def prefilter(args):
+    """The pre-filter's config of ``--prefilter`` and its options, or ``None``."""
+    from kfpga.core.config import FilterConfig
+
+    name = getattr(args, "prefilter", None)
+    chosen = None if name is None else registry.get(name)
+    for spec in _prefilter_specs():
+        for option in spec.prefilter.options:
+            if getattr(args, _option_dest(option), None) is not None and (chosen is None or chosen.name != spec.name):
+                raise UsageError(f"{option} applies with --prefilter {spec.name} only")
+    if chosen is None:
+        return None
+    values = {_option_dest(o): getattr(args, _option_dest(o), None) for o in chosen.prefilter.options}
+    try:
+        params = chosen.prefilter.params(values)
+    except (TypeError, ValueError) as exc:
+        raise UsageError(f"--prefilter {chosen.name}: {exc}") from None
+    return FilterConfig(filter=chosen.name, params=params)
+
+
+def describe_params(params):
+    """``"threshold 500"``: a pre-filter's parameters in one phrase."""
+    return ", ".join(f"{f.name} {getattr(params, f.name):g}" if isinstance(getattr(params, f.name), float | int)
+                     else f"{f.name} {getattr(params, f.name)}" for f in dataclasses.fields(params))
+
+
+# -- the signal of compare, sweep and propose ------------------------------------------------------
+
+
+def check_signal_args(args):
+    """The options of the signal-driven commands that exclude each other."""
+    if args.input:
+        if args.seed is not None:
+            not_with("--seed", "--input", "the samples come from the file, no noise is drawn")
+        if args.scenario is not None:
+            not_with("--scenario", "--input", "the samples come from the file")
+    else:
+        if args.clip:
+            not_with("--clip", "a scenario", "scenarios stay within the 16-bit range; --clip is for --input files")
+        args.scenario = args.scenario or "sine"
+
+
+def _file_samples(args, config, command, need_truth, notes):
+    from kfpga.core.csvio import read_samples
+
+    samples = read_samples(args.input, clip=args.clip, columns=config.inputs)
+    y, truth = samples.y, samples.truth
+    if args.samples:
+        if args.samples > len(samples):
+            raise UsageError(f"--samples {args.samples} is more than the {len(samples)} rows of {args.input}")
+        y = {k: v[: args.samples] for k, v in y.items()} if isinstance(y, dict) else y[: args.samples]
+        truth = truth[: args.samples] if truth is not None else None
+    if samples.clipped:
+        notes.append(f"{args.input}: {samples.clipped} value(s) outside the 16-bit range saturated (--clip)")
+    if truth is None:
+        if need_truth:
+            raise UsageError(f"{command} needs a truth to measure RMSE: use a scenario or an --input with a 'truth' column")
+        notes.append(f"{args.input}: no 'truth' column, so RMSE against truth is not reported")
+    return truth, y, args.samples or len(samples)
+
+
+def samples_for(args, config, *, command, need_truth=False):
+    """``(truth, y, label)`` from ``--input`` or the chosen scenario.
+
+    Everything is checked before anything is printed (the seed, notes about the file), so a
+    bad invocation ends in one line: the error.
+    """
+    from kfpga.model import scenarios
+
+    notes = []
+    if args.input:
+        truth, y, count = _file_samples(args, config, command, need_truth, notes)
+    else:
+        count = args.samples or 20000
+    if count < 2:
+        raise UsageError(f"{command} needs at least 2 samples, not {count}")
+    if args.settle is not None and not 0 <= args.settle < count:
+        raise UsageError(f"--settle must be between 0 and {count - 1}, not {args.settle}")
+    if args.input:
+        label = f"input {args.input}"
+    else:
+        args.seed = pick_seed(args.seed)
+        notes.append(f"seed {args.seed} (replay with --seed {args.seed})")
+        truth, y = scenarios.for_config(args.scenario, count, args.seed, config)
+        label = f"scenario {args.scenario}"
+    for note in notes:
+        info(note)
+    return truth, y, label
+
+
+def require_word_lengths(config, command):
+    """Refuse a filter whose formats have no word length to trade: no multiplier operand, no
+    fraction bits of a state (a smoother that selects and averages its samples in their own 16 bits)."""
+    spec = config.spec
+    if not any(spec.points[name].operand for name in config.formats):
+        raise UsageError(f"{command} does not apply to the {spec.name} filter: it has no multiplier operand and no "
+                         "fraction bits to trade against error (see kfpga formats)")
+
+
+# -- the ADC inputs of simulate and testbench -----------------------------------------------------------
+
+
+def check_channel(args, config=None):
+    """``--channel`` names the one channel of ``--channels 1``; with six it would be ignored, and
+    a model that names its ADC channels (``model.adc``, or two observations) must agree.
+
+    Sets ``args.adc`` to the ADC channel of each input (``None`` with six channels).
+    """
+    if args.channel is not None and args.channels == 6:
+        not_with("--channel", "--channels 6", "all six channels are sampled and filtered")
+    args.adc = None
+    if config is None:
+        return
+    spec = config.spec
+    if args.channels == 6:
+        if len(config.inputs) > 1:
+            raise UsageError(f"--channels 6 filters six channels of one input each; this model reads {len(config.inputs)} "
+                             f"ADC channels per update ({', '.join(config.inputs)}): use --channels 1")
+        if spec.adc is not None and spec.adc(config.params) is not None:
+            raise UsageError("--channels 6 filters every ADC channel, so the model's adc would be ignored: remove "
+                             "adc from [model], or use --channels 1")
+        return
+    try:
+        args.adc = spec.adc_channels(config.params, args.channel)
+    except ValueError as exc:
+        raise UsageError(f"--channel: {exc}") from None
+
+
+def add_adc_source_args(p):
+    """--samples, --seed, --scenario, --input: the ADC inputs of simulate and testbench."""
+    p.add_argument("--samples", type=positive_int, metavar="N",
+                   help="estimates to check (default: 2000, or every row of --input; at most those)")
+    p.add_argument("--seed", type=seed_type, metavar="S", help="noise seed of the ADC inputs (default: random, printed)")
+    p.add_argument("--scenario", choices=("sine", "random-accel"), help="ADC input signal (default: sine)")
+    p.add_argument("--input", metavar="CSV", help="replay a CSV on the ADC inputs: y0..y5, or y on all six")
+
+
+def adc_source_params(args, config):
+    """The ADC inputs of simulate and testbench: a scenario with a seed, or a CSV replay; sets
+    ``args.samples`` (default 2000, or every row of the CSV) and ``args.seed``; returns the
+    bench parameters."""
+    if args.input:
+        from kfpga.sim.sources import csv_source
+
+        if args.seed is not None:
+            not_with("--seed", "--input", "the ADC replays the file, no noise is drawn")
+        if args.scenario is not None:
+            not_with("--scenario", "--input", "the ADC replays the file")
+        rows = csv_source(args.input, clip=False).codes.shape[1]  # fail early, with the file and line
+        if args.samples is None:
+            args.samples = rows if args.channels != 6 else 6 * rows
+        limit = rows * (6 if args.channels == 6 else 1)
+        if args.samples > limit:
+            raise UsageError(f"--samples {args.samples} is more than the {limit} estimates the {rows} rows of "
+                             f"{args.input} give")
+        args.seed = 0  # the source is the file; the seed names the run only
+    else:
+        args.samples = 2000 if args.samples is None else args.samples
+        args.scenario = args.scenario or "sine"
+        args.seed = pick_seed(args.seed)
+        info(f"seed {args.seed} (replay with --seed {args.seed})")
+    return {"variant": args.variant, "six": args.channels == 6, "channel": args.adc[0] if args.adc else None,
+            "adc": list(args.adc) if args.adc else None, "samples": args.samples,
+            "seed": args.seed, "scenario": args.scenario, "csv": str(Path(args.input).resolve()) if args.input else None,
+            "config_toml": config.to_toml()}

@@ -1,0 +1,39 @@
+"""``kfpga filters``: the registered filters."""
+
+from __future__ import annotations
+
+from kfpga.cli import common
+from kfpga.core import registry
+
+
+def add_parser(sub):
+    p = sub.add_parser("filters", help="list the registered filters, their variants, inputs and outputs",
+                       description="List every registered filter with its variants, its inputs and outputs, and "
+                                   "the document it comes from. Any of them can be given to the other commands "
+                                   "with --filter NAME, or by [filter] name in a config file.")
+    common.add_json(p, "print the list as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args):
+    rows = [{"name": s.name, "aliases": list(s.aliases), "summary": s.summary,
+             "variants": {n: v.summary for n, v in s.variants.items()},
+             "inputs": [n for n, _ in s.inputs_for(s.params())],
+             "outputs": [o.name for o in s.outputs_for(s.params())], "source": s.source,
+             "presets": {n: summary for n, (summary, _) in s.presets.items()},
+             "evaluation": s.evaluation is not None,
+             "default": s.name == registry.DEFAULT} for s in registry.specs()]
+    if args.json:
+        common.emit_json(rows)
+        return 0
+    for r in rows:
+        also = f" (also: {', '.join(r['aliases'])})" if r["aliases"] else ""
+        print(f"{r['name']:<10} {r['summary']}{' (default)' if r['default'] else ''}{also}")
+        for name, summary in r["variants"].items():
+            print(f"  --variant {name:<9} {summary}")
+        print(f"  inputs {', '.join(r['inputs'])}; outputs {', '.join(r['outputs'])}; source: {r['source']}")
+        for name, summary in r["presets"].items():
+            print(f"  --preset {name:<10} {summary}")
+        if r["evaluation"]:
+            print(f"  kfpga evaluate {r['name']}: its source document's evaluation")
+    return 0

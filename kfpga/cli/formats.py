@@ -1,0 +1,67 @@
+"""``kfpga formats``: the quantisation formats of a config, or the config as a file to edit."""
+
+from __future__ import annotations
+
+from kfpga.cli import common
+from kfpga.core.errors import UsageError
+
+
+def add_parser(sub):
+    p = sub.add_parser("formats", help="show the quantisation formats (or write a config file to edit)",
+                       description="Show every quantisation point with its format, the range it covers and the "
+                                   "range the float analysis found; --toml prints a complete config file.")
+    common.add_filter_args(p, variant=False)
+    p.add_argument("--config", metavar="TOML", help="config to show (default: the built-in defaults)")
+    p.add_argument("--toml", action="store_true",
+                   help="print the config as TOML, the formats commented out (defaults that follow the parameters)")
+    p.add_argument("--pin-formats", action="store_true",
+                   help="with --toml: write the formats as settings, so they stay fixed when a parameter changes")
+    common.add_json(p, "print the table as JSON")
+    p.set_defaults(func=run)
+
+
+def formats_table(config):
+    """Rows describing each quantisation point (``kfpga formats``)."""
+    points = config.spec.points
+    ranges = config.ranges()
+    rows = []
+    for name, fmt in config.formats.items():
+        point = points[name]
+        rows.append({
+            "point": name,
+            "format": str(fmt),
+            "bits": fmt.width,
+            "covers": f"±{fmt.max_value:.6g}",
+            "analysed_max": ranges.get(name),
+            "lsb": fmt.lsb,
+            "rounding": fmt.rounding.value,
+            "overflow": fmt.overflow.value,
+            "variants": ",".join(point.variants or config.spec.variants),
+            "multiplier_operand": point.operand,
+            "description": point.description,
+        })
+    return rows
+
+
+def run(args):
+    if args.toml and args.json:
+        raise UsageError("--toml and --json are two ways to print the same: choose one")
+    if args.pin_formats and not args.toml:
+        common.not_with("--pin-formats", "the table", "it says how --toml writes the formats")
+    config = common.load_config(args)
+    common.warn_precision(config)
+    if args.toml:
+        print(config.to_toml(formats=args.pin_formats), end="")
+        return 0
+    rows = formats_table(config)
+    if args.json:
+        common.emit_json(rows)
+        return 0
+    print(f"{'point':<6} {'format':<7} {'bits':>4} {'covers':>12} {'analysed max':>13} {'rounding':<10} "
+          f"{'overflow':<9} description")
+    for r in rows:
+        amax = f"{r['analysed_max']:.6g}" if r["analysed_max"] is not None else "-"
+        op = " [multiplier operand]" if r["multiplier_operand"] else ""
+        print(f"{r['point']:<6} {r['format']:<7} {r['bits']:>4} {r['covers']:>12} {amax:>13} {r['rounding']:<10} "
+              f"{r['overflow']:<9} {r['description']}{op}")
+    return 0

@@ -1,0 +1,205 @@
+"""A filter is a plugin: what a filter owns lives in its own files, and a filter registered from
+outside the package gets every generic command, ``kfpga evaluate`` and the contract suite.
+
+* No package file outside a filter's own (``model/NAME.py``, ``hw/NAME.py``, ``model/evaluations/NAME.py``,
+  any ``NAME_*.py``) and the registry names the filter or imports its modules: identifiers,
+  imports and strings (docstrings and comments may mention it).
+* A toy filter (a one-state exponential smoother), defined and registered in this file, runs
+  through the commands and the contract checks with no package file edited.
+"""
+
+import ast
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from kfpga.cli import main
+from kfpga.core import registry
+from kfpga.core.formats import register_formats
+from kfpga.core.params import number
+from kfpga.core.spec import Constant, Evaluation, FilterSpec, Output, Point, Variant
+from kfpga.model.ranges import float_ranges, full_scale_stimulus
+
+ROOT = Path(__file__).resolve().parent.parent
+#: The package's files, each once (kfpga/model, hw and sim link to the top-level folders).
+PACKAGE_FILES = [p for folder in ("kfpga", "model", "hw", "sim") for p in (ROOT / folder).rglob("*.py")
+                 if not (folder == "kfpga" and p.relative_to(ROOT / folder).parts[0] in ("model", "hw", "sim"))]
+
+
+def _docstrings(tree):
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Module | ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef) and node.body:
+            first = node.body[0]
+            if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant) and isinstance(first.value.value, str):
+                out.add(id(first.value))
+    return out
+
+
+def code_words(tree):
+    """``(line, words)`` of every import, identifier, definition, argument and string (not a
+    docstring) of a module; a dotted or ``module:attribute`` string gives its parts too."""
+    skip = _docstrings(tree)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                yield node.lineno, [*a.name.split("."), *([a.asname] if a.asname else [])]
+        elif isinstance(node, ast.ImportFrom):
+            yield node.lineno, [*(node.module or "").split("."), *(a.name for a in node.names)]
+        elif isinstance(node, ast.Name):
+            yield node.lineno, [node.id]
+        elif isinstance(node, ast.FunctionDef | ast.ClassDef):
+            yield node.lineno, [node.name]
+        elif isinstance(node, ast.arg):
+            yield node.lineno, [node.arg]
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skip:
+            yield node.lineno, [node.value, *node.value.replace(":", ".").split(".")]
+
+
+def own_file(path, name):
+    return path.stem == name or path.stem.startswith(f"{name}_")
+
+
+@pytest.mark.parametrize("name", registry.names())
+def test_a_filter_is_named_only_in_its_own_files_and_the_registry(name):
+    spec = registry.get(name)
+    names = {spec.name, *spec.aliases}
+    found = []
+    for path in PACKAGE_FILES:
+        if own_file(path, name) or path == ROOT / "kfpga" / "core" / "registry.py":
+            continue
+        for line, words in code_words(ast.parse(path.read_text())):
+            if names & set(words):
+                found.append(f"{path.relative_to(ROOT)}:{line}")
+    assert found == [], f"the {name} filter is named outside its own files: {found}"
+
+
+def test_the_check_finds_a_name():
+    tree = ast.parse('"""kalman2 in a docstring is fine."""\nfrom kfpga.model import kalman2\nx = "tukey53h"\n')
+    words = {w for _, ws in code_words(tree) for w in ws}
+    assert {"kalman2", "tukey53h"} <= words and "kalman2 in a docstring is fine." not in words
+
+
+# -- a toy filter, registered from here -----------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class ToyParams:
+    """An exponential smoother: ``x = x + alpha (y - x)``."""
+
+    alpha: float = 0.25
+    R: float = 4.0
+
+    def __post_init__(self):
+        if not 0 < number("alpha", self.alpha) < 1:
+            raise ValueError(f"alpha must be in (0, 1), not {self.alpha!r}")
+
+
+TOY_POINTS = {p.name: p for p in (Point("x", "smoothed value (state, output)"),
+                                  Point("e", "innovation y - x", role="operand"),
+                                  Point("a", "the gain alpha", role="operand", constant=True))}
+
+
+def toy_update(ops, k, x, u):
+    e = ops.rq(ops.sub(u["y"], x["x"]), "e")                     # e = y - x
+    xn = ops.rq(ops.add(x["x"], ops.mul(k["a"], e)), "x")        # x = x + alpha e
+    return {"x": xn}, {"x": xn}
+
+
+TOY_VARIANTS = {"steady": Variant("steady", "constant gain alpha", (("x", "x"),),
+                                  lambda p: {"a": Constant(p.alpha, "a", "alpha")}, lambda p: {"x": 0.0}, toy_update)}
+
+
+def toy_reference(params, variant, y):
+    y = np.asarray(y, dtype=np.float64)
+    out, x = np.empty(y.shape), 0.0
+    for n, v in enumerate(y):
+        x += params.alpha * (v - x)
+        out[n] = x
+    return {"x": out}
+
+
+def toy_core(config, variant, *, channels=1, stages=None):
+    from kfpga.hw.sequencer import SequentialCore
+
+    return SequentialCore(config, variant, channels=channels)
+
+
+def _toy_run(options, seed):
+    rng = np.random.default_rng(seed)
+    y = np.round(1000 + rng.normal(0, 20, 2000))
+    x = toy_reference(ToyParams(), "steady", y)["x"]
+    noise = float(np.std(x[200:] - 1000) / 20)
+    return {"seed": seed, "noise_ratio": noise,
+            "claims": [{"claim": "smoothing reduces the noise", "document": "< 1", "ours": noise,
+                        "verdict": "reproduced" if noise < 1 else "not reproduced"}]}
+
+
+TOY_EVALUATION = Evaluation(summary="a toy evaluation", description="Smooths a noisy constant.",
+                            add_arguments=lambda p: None, run=_toy_run,
+                            table=lambda r: f"noise ratio {r['noise_ratio']:.3f}", summary_json=lambda r: r)
+
+TOY = FilterSpec(
+    name="toy",
+    summary="an exponential smoother (a test's own filter)",
+    source="tests/test_plugins.py",
+    params=ToyParams,
+    points=TOY_POINTS,
+    inputs=(("y", "the sample"),),
+    outputs=(Output("x", "x", "the smoothed value"),),
+    variants=TOY_VARIANTS,
+    points_for=lambda params: list(TOY_POINTS),
+    default_formats=lambda params, ranges, *, operand_bits, state_frac: register_formats(
+        TOY, params, ranges, operand_bits=operand_bits, state_frac=state_frac),
+    ranges=lambda params, stimulus=None: float_ranges(
+        TOY, params, list(TOY_VARIANTS.values()), full_scale_stimulus(params.R) if stimulus is None else stimulus),
+    validate=lambda config: None,
+    reference=toy_reference,
+    core=toy_core,
+    goals=lambda config, variant, channels=1: {"logic_cells": 3000, "mul18": 4},
+    default_output="x",
+    random_params=lambda rng: ToyParams(alpha=float(rng.uniform(0.05, 0.9))),
+    evaluation=TOY_EVALUATION,
+)
+
+
+@pytest.fixture
+def toy():
+    registry.register(TOY)
+    try:
+        yield TOY
+    finally:
+        registry.unregister(TOY.name)
+
+
+def test_a_toy_filter_gets_the_generic_commands(toy, tmp_path, capsys, seed):
+    assert main(["filters", "--json"]) == 0
+    assert "toy" in [r["name"] for r in json.loads(capsys.readouterr().out)]
+    assert main(["compare", "--filter", "toy", "--samples", "3000", "--seed", str(seed), "--json"]) == 0
+    m = json.loads(capsys.readouterr().out)
+    assert m["overflows"] == 0 and abs(m["rmse_fixed_over_float"] - 1) < 0.01
+    assert main(["formats", "--filter", "toy", "--json"]) == 0
+    assert [r["point"] for r in json.loads(capsys.readouterr().out)] == ["x", "e", "a"]
+    src, out = tmp_path / "in.csv", tmp_path / "out.csv"
+    src.write_text("y\n" + "\n".join(str(v) for v in range(0, 400, 7)) + "\n")
+    assert main(["filter", "--filter", "toy", "--input", str(src), "--output", str(out)]) == 0
+    assert out.read_text().splitlines()[0].split(",")[:1] == ["x"]
+    assert main(["generate", "--filter", "toy", "--out", str(tmp_path / "gen")]) == 0
+    assert (tmp_path / "gen" / "kfpga_top.v").exists()
+    capsys.readouterr()
+    assert main(["evaluate", "toy", "--seed", str(seed), "--json"]) == 0
+    claims = json.loads(capsys.readouterr().out)["claims"]
+    assert claims[0]["verdict"] == "reproduced"
+
+
+def test_a_toy_filter_passes_the_contract(toy, tmp_path, seed):
+    from tests.contract import test_contract as contract
+
+    contract.test_model_equals_the_exact_rational_spec("toy", "steady", seed)
+    for channels in (1, 3):
+        contract.test_rtl_equals_model_with_backpressure("toy", "steady", channels, seed)
+    contract.test_declared_latency_and_cycles_per_update_are_measured("toy", "steady")
+    contract.test_generated_verilog_parses_and_lints("toy", "steady", tmp_path)
