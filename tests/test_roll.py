@@ -107,7 +107,7 @@ def test_evaluate_roll_cli_errors(tmp_path, capsys):
     for argv, message in ((["--input", str(bad)], "line 4: roll = 'x' is not a number"),
                           (["--samples", "5"], "--samples must be at least 8"),
                           (["--fading", "-1"], "--fading: s must be > 0"),
-                          (["--input", str(bad), "--seed", "1"], "--seed does not apply with --input")):
+                          (["--input", str(bad), "--seed", "1"], "--seed does not apply here")):
         assert main(["evaluate", "roll", *argv]) == 2
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1

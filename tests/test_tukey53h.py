@@ -216,7 +216,7 @@ def test_prefilter_that_could_overflow_is_refused():
     narrow = FilterConfig(filter="tukey53h", formats={"x": QFormat(12, 0)}, check_ranges=False)
     with pytest.raises(ValueError, match="can overflow"):
         FilterSystem(FilterConfig(), prefilter=narrow)
-    with pytest.raises(ValueError, match="pre-filter must be one of 53h"):
+    with pytest.raises(ValueError, match="pre-filter must be one of tukey53h"):
         FilterSystem(FilterConfig(), prefilter=FilterConfig(filter="alphabeta"))
 
 
@@ -283,7 +283,7 @@ def test_filter_offline_cli(tmp_path, capsys):
 
 @pytest.mark.parametrize(("argv", "message"), [
     (["filter", "--input", "x.csv", "--output", "o.csv", "--offline"], "--offline applies to the tukey53h filter"),
-    (["generate", "--out", "g", "--threshold", "5"], "--threshold applies with --prefilter 53h only"),
+    (["generate", "--out", "g", "--threshold", "5"], "--threshold applies with --prefilter tukey53h only"),
     (["generate", "--out", "g", "--prefilter", "tukey53h", "--threshold", "0"], "threshold must be > 0"),
     (["compare", "--prefilter", "tukey53h", "--filter", "kalman", "--preset", "va2"], "one-input filter"),
     (["compare", "--prefilter", "tukey53h", "--plot", "p.png"], "--plot does not apply with --prefilter"),

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from kfpga.cli import common
 from kfpga.core import registry
+from kfpga.core.errors import UsageError
 
 
 def add_parser(sub):
@@ -32,12 +33,13 @@ def run(args):
     plot = common.check_plot(args.plot)
     if plot and evaluation.plot is None:
         common.not_with("--plot", f"evaluate {args.spec_name}", "this evaluation has no figures")
+    evaluation.check(args)
     if evaluation.seeded(args):
         seed = common.pick_seed(args.seed)
         common.info(f"seed {seed}")
     else:
         if args.seed is not None:
-            common.not_with("--seed", "this evaluation's input", "it draws no random numbers")
+            raise UsageError("--seed does not apply here: this run draws no random numbers (its data come from a file)")
         seed = None
     result = evaluation.run(args, seed)
     if plot:

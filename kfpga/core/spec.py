@@ -158,6 +158,9 @@ class Evaluation:
     seeded:
         ``seeded(options) -> bool``: whether a run with these options draws random numbers
         (a run on a file may not); by default always.
+    check:
+        ``check(options)``: refuse bad options before anything runs or is printed (raises
+        :class:`~kfpga.core.errors.UsageError`).
     """
 
     summary: str
@@ -168,6 +171,7 @@ class Evaluation:
     summary_json: Callable
     plot: Callable | None = None
     seeded: Callable = field(default=lambda options: True)
+    check: Callable = field(default=lambda options: None)
 
 
 @dataclass(frozen=True)

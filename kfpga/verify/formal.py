@@ -102,7 +102,7 @@ def _cores():
 
 def jobs():
     """Every job, in the order of the table."""
-    from kfpga.hw import properties as p
+    from kfpga.verify import properties as p
 
     out = []
     for ratio in (10, 5):

@@ -221,9 +221,12 @@ def _add_arguments(parser):
     parser.add_argument("--targets", type=int, default=5, metavar="N", help="targets tracked at once, 1..256 (default: 5)")
 
 
-def _run(options, seed):
+def _check(options):
     if not 1 <= options.targets <= 256:
         raise UsageError(f"--targets must be 1..256 (the tracker's limit), not {options.targets}")
+
+
+def _run(options, seed):
     return alpha_beta(AlphaBetaScenario(targets=options.targets), seed=seed)
 
 
@@ -236,6 +239,7 @@ EVALUATION = Evaluation(
                 "the additions and multiplications per update (the paper's table 1, counted on each filter's "
                 "update), and how they compare with the paper.",
     add_arguments=_add_arguments,
+    check=_check,
     run=_run,
     table=alpha_beta_table,
     summary_json=lambda r: {k: r[k] for k in ("seed", "scenario", "rows", "costs")} | {"findings": alpha_beta_findings(r)},

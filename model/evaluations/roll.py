@@ -244,25 +244,38 @@ def _add_arguments(parser):
                                                                   "the paper's 100; > 0, 1 is none)")
 
 
+def _params(options):
+    from kfpga.model import roll as rp
+
+    try:
+        return rp.RollParams() if options.fading is None else rp.RollParams(s=options.fading)
+    except (TypeError, ValueError) as exc:
+        raise UsageError(f"--fading: {exc}") from None
+
+
+def _check(options):
+    from kfpga.model import roll as rp
+
+    _params(options)
+    if options.input:
+        if options.samples is not None:
+            raise UsageError("--samples does not apply with --input: the file has its own length")
+    elif options.samples is not None and options.samples < rp.MIN_SAMPLES:
+        raise UsageError(f"--samples must be at least {rp.MIN_SAMPLES} (each filter starts from 3 samples), not "
+                         f"{options.samples}")
+
+
 def _run(options, seed):
     from kfpga.core.csvio import read_series
     from kfpga.model import roll as rp
 
-    try:
-        params = rp.RollParams() if options.fading is None else rp.RollParams(s=options.fading)
-    except (TypeError, ValueError) as exc:
-        raise UsageError(f"--fading: {exc}") from None
+    params = _params(options)
     if options.input:
-        if options.samples is not None:
-            raise UsageError("--samples does not apply with --input: the file has its own length")
         z = read_series(options.input)
         if len(z) < rp.MIN_SAMPLES:
             raise InputError(f"{options.input}: {len(z)} samples; the interval predictor needs at least {rp.MIN_SAMPLES}")
         return roll(seed=None, samples=len(z), series=(f"{Path(options.input).name} ({len(z)} samples)", z), params=params)
-    samples = 480 if options.samples is None else options.samples
-    if samples < rp.MIN_SAMPLES:
-        raise UsageError(f"--samples must be at least {rp.MIN_SAMPLES} (each filter starts from 3 samples), not {samples}")
-    return roll(seed=seed, samples=samples, params=params)
+    return roll(seed=seed, samples=480 if options.samples is None else options.samples, params=params)
 
 
 EVALUATION = Evaluation(
@@ -274,6 +287,7 @@ EVALUATION = Evaluation(
                 "synthetic roll series (or a CSV of yours). Prints the prediction RMSE of each form, a sweep over s, "
                 "and how they compare with the paper's 0.3935 and 0.1173 deg and its 0.2 deg requirement.",
     add_arguments=_add_arguments,
+    check=_check,
     run=_run,
     table=roll_table,
     summary_json=lambda r: ({k: r[k] for k in ("seed", "params", "rows", "sweep", "formats", "fixed", "words")}
