@@ -37,6 +37,7 @@ demo: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python bench/bench_model.py
 	$(BIN)/python bench/bench_cosim.py
+	$(BIN)/python bench/bench_propose.py
 
 # the formal properties of kfpga/verify/properties.py, proven with SymbiYosys; prints the table (about 15 min on 2 cores)
 formal: $(STAMP)

@@ -15,7 +15,7 @@ from functools import reduce
 from amaranth import Cat, Const, Mux, Signal, signed
 
 from kfpga.core.fixed import Overflow, Rounding
-from kfpga.core.ops import Ops
+from kfpga.core.ops import Ops, const_width
 
 __all__ = ["AmaranthOps", "any_flag", "live_flags", "requantize"]
 
@@ -128,7 +128,7 @@ class AmaranthOps(Ops):
         return raw.as_signed()
 
     def _const(self, raw, fmt, value, name):
-        return Const(raw, signed(fmt.width))
+        return Const(raw, signed(const_width(raw, fmt)))
 
     def _zero(self):
         return Const(0, signed(1))

@@ -86,13 +86,15 @@ def write_lint_waivers(out_dir, file_glob):
 
 
 def write_top(out_dir, config, *, variant=None, six_channel=False, channel=None, ratio=10, timeout_periods=40,
-              out_field=None, prefilter=None):
+              out_field=None, prefilter=None, architecture=None, stages=None):
     """Write ``kfpga_top.v`` (and the lint waivers) into ``out_dir``; returns ``(verilog path, top)``.
-    ``prefilter``: the config of a 53H smoother between the controller and the core, or ``None``."""
+    ``prefilter``: the config of a filter between the controller and the core, or ``None``;
+    ``architecture``: the core's (default: the parallel one where it runs)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     top = FilterSystem(config, variant=variant, six_channel=six_channel, channel=channel, ratio=ratio,
-                       timeout_periods=timeout_periods, out_field=out_field, prefilter=prefilter)
+                       timeout_periods=timeout_periods, out_field=out_field, prefilter=prefilter,
+                       architecture=architecture, stages=stages)
     path = out_dir / f"{TOP_NAME}.v"
     path.write_text(to_verilog(top, TOP_NAME))
     write_lint_waivers(out_dir, f"*{TOP_NAME}.v")

@@ -29,8 +29,24 @@ def _states(k, live):
     return [live[f"x{i + 1}"] for i in range(k["n"])]
 
 
+def _predict_operands(ops, k, live):
+    for j, v in eq.predict_operands(ops, k, _states(k, live)).items():          # xo_j = [x_j]_xo
+        live[f"xo{j + 1}"] = v
+    return live
+
+
+def _predict_terms(ops, k, live):
+    xo = {j: live[f"xo{j + 1}"] for j in range(k["n"]) if f"xo{j + 1}" in live}
+    for i, row in enumerate(eq.predict_terms(ops, k, _states(k, live), xo)):   # F_ij x_j, exact
+        for j, v in enumerate(row):
+            if v is not None:
+                live[f"ft{i}{j}"] = v
+    return live
+
+
 def _predict_sums(ops, k, live):
-    for i, v in enumerate(eq.predict_sums(ops, k, _states(k, live))):          # F x, exact
+    terms = [[live.get(f"ft{i}{j}") for j in range(k["n"])] for i in range(k["n"])]
+    for i, v in enumerate(eq.predict_sums(ops, k, None, terms)):               # F x, exact
         live[f"xs{i + 1}"] = v
     return live
 
@@ -98,22 +114,38 @@ def default_stages(params):
 class SteadyCore(LoopPipeline):
     """The steady-state filter of any model: x = xl + K e, xl = F x, e = y - H xl.
 
-    Five steps (``stages`` 1..5 register stages, :attr:`cuts`): the exact sums F x; their
-    rounding xl = [F x]; yh = H xl and e = y - yh; the products K e; x = xl + K e. With four
-    stages the first two steps share one, with fewer the steps are grouped further. With two
-    observations the last step is split in two (``stages`` 1..6): xl + K_i1 e_1, exact, then
-    x = [that + K_i2 e_2]. One
+    Seven steps (``stages`` 1..7 register stages, :attr:`cuts`): the states a constant of F
+    multiplies rounded into its operands; the products F_ij x_j; the exact sums F x; their
+    rounding xl = [F x]; yh = H xl and e = y - yh; the products K e; x = xl + K e. With five
+    stages the first three steps share one, with fewer the steps are grouped further; six and
+    seven give the products by F (then their operands) stages of their own, for constants of F
+    that are not powers of two. With two observations the last step is split in two (``stages``
+    1..8): xl + K_i1 e_1, exact, then x = [that + K_i2 e_2]. One
     channel takes a sample every L cycles, C >= L channels in turn one per clock. The default
     L is :func:`default_stages`. Parameters and members as
     :class:`~kfpga.hw.cvloop.ConstantGainLoop`; the input word has one field per observation.
     """
 
-    steps = (_predict_sums, _predict_round, _observe, _products, _correct)
-    reads = ({f"x{i}" for i in _ALL}, {f"xs{i}" for i in _ALL}, {f"xl{i}" for i in _ALL} | {"y", "y1", "y2"},
+    steps = (_predict_operands, _predict_terms, _predict_sums, _predict_round, _observe, _products, _correct)
+    reads = ({f"x{i}" for i in _ALL}, {f"x{i}" for i in _ALL} | {f"xo{i}" for i in _ALL},
+             {f"ft{i}{j}" for i in range(4) for j in range(4)}, {f"xs{i}" for i in _ALL},
+             {f"xl{i}" for i in _ALL} | {"y", "y1", "y2"},
              {f"e{j}" for j in _OBS}, {f"xl{i}" for i in _ALL} | {f"ke{i}{j}" for i in range(4) for j in range(2)})
-    cuts: ClassVar[dict] = MappingProxyType({1: (), 2: (3,), 3: (2, 4), 4: (2, 3, 4), 5: (1, 2, 3, 4)})
+    # F's entries 0 or +-2**k: the steps of products by F are empty, and up to five stages cut as
+    # the loop always has
+    cuts: ClassVar[dict] = MappingProxyType({1: (), 2: (5,), 3: (4, 6), 4: (4, 5, 6), 5: (3, 4, 5, 6),
+                                             6: (2, 3, 4, 5, 6), 7: (1, 2, 3, 4, 5, 6)})
     cuts_two_observations: ClassVar[dict] = MappingProxyType(
-        {1: (), 2: (3,), 3: (2, 4), 4: (2, 3, 4), 5: (2, 3, 4, 5), 6: (1, 2, 3, 4, 5)})
+        {1: (), 2: (5,), 3: (4, 6), 4: (4, 5, 6), 5: (4, 5, 6, 7), 6: (3, 4, 5, 6, 7), 7: (2, 3, 4, 5, 6, 7),
+         8: (1, 2, 3, 4, 5, 6, 7)})
+    # constants of F that take multipliers: the operands are rounded in a stage of their own first
+    # (the rounding's carry chain, the multiplier and the sum in one stage would be the longest
+    # path); measured with kfpga explore on 2- and 3-state trackers at T = 0.01 s
+    cuts_multiplied: ClassVar[dict] = MappingProxyType({1: (), 2: (4,), 3: (2, 5), 4: (1, 4, 5), 5: (1, 2, 4, 5),
+                                                        6: (1, 2, 3, 4, 5), 7: (1, 2, 3, 4, 5, 6)})
+    cuts_multiplied_two_observations: ClassVar[dict] = MappingProxyType(
+        {1: (), 2: (4,), 3: (2, 5), 4: (1, 4, 5), 5: (1, 2, 4, 5), 6: (1, 2, 4, 5, 6), 7: (1, 2, 3, 4, 5, 6),
+         8: (1, 2, 3, 4, 5, 6, 7)})
     carry = ("yh1", "yh2")
 
     def __init__(self, config, *, channels=1, stages=None):
@@ -121,12 +153,14 @@ class SteadyCore(LoopPipeline):
         self.writes = {f"x{i + 1}": f"x{i + 1}_next" for i in range(n)}
         # the observations' names are the model's own: the step after the prediction reads them
         names = set(config.inputs)
-        self.reads = (*self.reads[:2], self.reads[2] | names, *self.reads[3:])
+        self.reads = (*self.reads[:4], self.reads[4] | names, *self.reads[5:])
         if config.params.m == 2:
-            self.steps = (*self.steps[:4], _correct_first, _correct_second)
-            self.reads = (*self.reads[:4], {f"xl{i}" for i in _ALL} | {f"ke{i}0" for i in range(4)},
+            self.steps = (*self.steps[:6], _correct_first, _correct_second)
+            self.reads = (*self.reads[:6], {f"xl{i}" for i in _ALL} | {f"ke{i}0" for i in range(4)},
                           {f"xk{i}" for i in _ALL} | {f"ke{i}1" for i in range(4)})
             self.cuts = self.cuts_two_observations
+        if any(not eq.free(v) for row in config.params.F for v in row):
+            self.cuts = self.cuts_multiplied if config.params.m == 1 else self.cuts_multiplied_two_observations
         stages = default_stages(config.params) if stages is None else stages
         super().__init__(config, "steady", channels=channels, stages=stages)
 
@@ -160,7 +194,7 @@ class FullCore(Core):
     """
 
     def __init__(self, config, *, channels=1):
-        config.require_hardware("full")
+        config.require_hardware("full", "parallel")
         super().__init__(config, "full", channels)
         f, n = config.formats, config.params.n
         self.n = n

@@ -36,7 +36,7 @@ from kfpga.hw.divider import Divider
 from kfpga.hw.sqrt import SquareRoot
 from kfpga.hw.storage import m4k_blocks, select
 
-__all__ = ["SequentialCore", "encode"]
+__all__ = ["SequentialCore", "encode", "make_core"]
 
 #: Fields of an instruction word, LSB first: (name, bits) with the address width filled in.
 _FIELDS = ("op", "dst", "a", "b", "c", "shift", "width", "rounding", "wrap")
@@ -231,10 +231,12 @@ class SequentialCore(Core):
                    # mask 2 k_half = 2**s, an AND and an OR tree, not a barrel shifter
                    Rounding.CONVERGENT: Mux((a & (k_half << 1)).any(), k_half, k_below),
                    Rounding.FIX: Mux(negative, k_fix, 0)}
-        with m.Switch(rounding):
-            for rule in sorted({ROUNDINGS[i.rounding] for i in rqs} - {Rounding.FLOOR}, key=ROUNDINGS.index):
-                with m.Case(ROUNDINGS.index(rule)):
-                    m.d.comb += addend_next.eq(addends[rule])
+        # a chain of multiplexers (a Verilog assign), not a case statement: an always block whose
+        # inputs happen never to change would stay undefined from time zero in Icarus
+        choice = Const(0, 1)
+        for rule in sorted({ROUNDINGS[i.rounding] for i in rqs} - {Rounding.FLOOR}, key=ROUNDINGS.index):
+            choice = Mux(rounding == ROUNDINGS.index(rule), addends[rule], choice)
+        m.d.comb += addend_next.eq(choice)
         summed = Signal(signed(w + 2), name="rq_sum")
         m.d.comb += summed.eq(held.as_signed() + addend)
         moved = Signal(signed(w + 2), name="rq_moved")
@@ -392,3 +394,11 @@ class SequentialCore(Core):
         return m
 
 
+
+
+def make_core(config, variant, *, channels=1, stages=None):
+    """The sequential core of any filter's ``variant`` (``channels`` channel states); ``stages``
+    does not apply (it runs one operation at a time)."""
+    if stages is not None:
+        raise ValueError("stages applies to a pipelined loop; the sequential core runs one operation at a time")
+    return SequentialCore(config, variant, channels=channels)

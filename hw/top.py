@@ -2,13 +2,13 @@
 
 from typing import NamedTuple
 
-from amaranth import ClockDomain, ClockSignal, Const, Module, Signal, signed
+from amaranth import ClockDomain, ClockSignal, Const, Module, Mux, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.cdc import ResetSynchronizer
 from amaranth.lib.wiring import In, Out
 
 from kfpga.core import registry
-from kfpga.hw.ads8364 import ADS8364Controller, SampleLayout
+from kfpga.hw.ads8364 import CONV0, ADS8364Controller, SampleLayout
 from kfpga.hw.clockdiv import ClockDivider
 
 __all__ = ["FilterSystem", "AdcFrontend", "PORTS", "ADC_PINS", "out_field", "prefilters", "prefilter_core"]
@@ -58,6 +58,11 @@ class AdcFrontend(wiring.Component):
     ----------
     six_channel, channel, ratio, timeout_periods:
         As :class:`FilterSystem`.
+    period:
+        System cycles from one conversion's start to the next (the conversion timer); ``None``:
+        the ADC converts as fast as it can. A conversion starts at the first ADC clock edge after
+        the timer's tick, so each start is up to ``ratio`` cycles late, never early, and the
+        rate is exactly ``clock / period``.
 
     Members
     -------
@@ -68,7 +73,10 @@ class AdcFrontend(wiring.Component):
         Sticky EOC timeout flag.
     """
 
-    def __init__(self, *, six_channel=False, channel=0, ratio=10, timeout_periods=40):
+    def __init__(self, *, six_channel=False, channel=0, ratio=10, timeout_periods=40, period=None):
+        if period is not None and (not isinstance(period, int) or period < 1):
+            raise ValueError(f"period must be a positive number of system cycles, not {period!r}")
+        self.period = period
         self.divider = ClockDivider(ratio=ratio)
         self.controller = ADS8364Controller(channel=channel, six_channel=six_channel, timeout_periods=timeout_periods)
         members = _pin_members(ADC_PINS)
@@ -83,7 +91,7 @@ class AdcFrontend(wiring.Component):
         word = ctrl.word
         m.d.comb += [
             ctrl.strobe.eq(divider.strobe),
-            ctrl.enable.eq(1),
+            ctrl.enable.eq(self._timer(m, ctrl, divider)),
             ctrl.eoc.eq(self.adc_eoc_n),
             ctrl.data.eq(self.adc_data),
             self.adc_clk.eq(divider.clk_out),
@@ -101,6 +109,23 @@ class AdcFrontend(wiring.Component):
         ]
         wiring.connect(m, wiring.flipped(self.o), ctrl.o)
         return m
+
+    def _timer(self, m, ctrl, divider):
+        """The controller's enable: always (free running), or from the conversion timer: a tick
+        every ``period`` cycles sets ``due``; the conversion's start (the controller leaving CONV0
+        on a strobe with its start bit) clears it."""
+        if self.period is None:
+            return 1
+        count = Signal(range(self.period), init=self.period - 1)
+        due = Signal(init=1)  # the first conversion right after reset
+        tick = count == 0
+        m.d.sync += count.eq(Mux(tick, self.period - 1, count - 1))
+        started = divider.strobe & (ctrl.state == CONV0) & ctrl.word.start
+        with m.If(tick):
+            m.d.sync += due.eq(1)
+        with m.Elif(started):
+            m.d.sync += due.eq(0)
+        return due
 
 
 class _Words(NamedTuple):
@@ -167,6 +192,9 @@ class FilterSystem(wiring.Component):
         EOC timeout in ADC CLK periods.
     out_field:
         The output field on ``out_data`` (default: the filter's, ``x1`` for the paper's).
+    architecture, stages:
+        The core's: ``parallel`` or ``sequential`` (default: the parallel core where it runs), and
+        the register stages of a pipelined loop (default: the core's).
     prefilter:
         ``None``, or the :class:`~kfpga.core.config.FilterConfig` of a filter that can stand before
         another (its spec's ``prefilter``, such as an outlier smoother) between the controller and
@@ -180,7 +208,7 @@ class FilterSystem(wiring.Component):
     """
 
     def __init__(self, config, *, variant=None, six_channel=False, channel=None, ratio=10, timeout_periods=40,
-                 out_field=None, prefilter=None):
+                 out_field=None, prefilter=None, architecture=None, stages=None):
         spec = config.spec
         self.six_channel = bool(six_channel)
         if self.six_channel:
@@ -203,9 +231,14 @@ class FilterSystem(wiring.Component):
         self.prefilter = None if prefilter is None else prefilter_core(prefilter, 6 if six_channel or len(self.adc) > 1
                                                                        else 1)
         # several inputs: all six are converted at one instant and read; the update takes its own
+        channels = 6 if six_channel or len(self.adc) > 1 else 1
+        config.board.check(channels, ratio)
         self.frontend = AdcFrontend(six_channel=six_channel or len(self.adc) > 1, channel=self.channel, ratio=ratio,
-                                    timeout_periods=timeout_periods)
-        self.core = spec.make_core(config, self.variant, channels=6 if six_channel else 1)
+                                    timeout_periods=timeout_periods, period=config.board.period_cycles())
+        options = {} if stages is None else {"stages": stages}
+        self.core = spec.make_core(config, self.variant, channels=6 if six_channel else 1, architecture=architecture,
+                                   **options)
+        self.architecture = architecture or spec.architectures(self.variant, config.params)[0]
         super().__init__(_pin_members(PORTS, out_width(config, self.out_field)))
 
     def elaborate(self, platform):

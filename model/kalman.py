@@ -35,18 +35,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from kfpga.core.board import WORST_PATH_GOAL_NS
 from kfpga.core.errors import ConfigError
 from kfpga.core.fixed import QFormat
-from kfpga.core.formats import noise_frac_bits, register_formats
+from kfpga.core.formats import MAX_OPERAND_BITS, covariance_frac, noise_frac_bits, register_formats
 from kfpga.core.params import matrix, number
 from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
 from kfpga.model.riccati import PBHError, check_pbh, dare
 
 __all__ = ["StateSpaceParams", "SPEC", "PRESETS", "dare_gain", "reference", "steady_update", "full_update", "free",
-           "PBHError", "predict_sums", "predict", "observe", "innovations", "gain_products", "correct", "covariance_fp",
-           "covariance_sums", "covariance_predict", "observed_rows", "innovation_variance", "gains_one", "gains_two",
-           "update_products", "update_corrections"]
+           "PBHError", "predict_operands", "predict_terms", "predict_sums", "predict", "observe", "innovations",
+           "gain_products", "correct", "covariance_fp", "covariance_sums", "covariance_predict", "observed_rows",
+           "innovation_variance", "gains_one", "gains_two", "update_products", "update_corrections"]
 
 MAX_STATES, MAX_OBS = 4, 2
 
@@ -76,9 +77,9 @@ class StateSpaceParams:
     R:
         m x m observation-noise covariance, symmetric positive definite.
     P0:
-        n x n initial covariance, symmetric positive definite.
+        n x n initial covariance, symmetric positive definite (default: 10 I, n x n).
     x0:
-        The n initial states.
+        The n initial states (default: n zeros).
     T:
         The sampling period in seconds (> 0): the time scale of the scenarios; the matrices
         already contain it.
@@ -98,8 +99,8 @@ class StateSpaceParams:
     Q: tuple = ((2.0,),)
     H: tuple = ((1.0, 0.0),)
     R: tuple = ((4.0,),)
-    P0: tuple = ((10.0, 0.0), (0.0, 10.0))
-    x0: tuple = (0.0, 0.0)
+    P0: tuple | None = None
+    x0: tuple | None = None
     T: float = 1.0
     observations: tuple = ()
     gain: tuple | None = None
@@ -129,7 +130,11 @@ class StateSpaceParams:
             raise ValueError(f"Q must be positive semi-definite, not {self.Q!r} "
                              f"(eigenvalues {', '.join(f'{e:.4g}' for e in q_eig)})")
         s(self, "R", matrix("R", self.R, m, m, symmetric=True, positive_definite=True))
+        if self.P0 is None:
+            s(self, "P0", tuple(tuple(10.0 if i == j else 0.0 for j in range(n)) for i in range(n)))
         s(self, "P0", matrix("P0", self.P0, n, n, symmetric=True, positive_definite=True))
+        if self.x0 is None:
+            s(self, "x0", (0.0,) * n)
         try:
             x0 = list(self.x0)
         except TypeError:
@@ -254,8 +259,8 @@ def _term(ops, k, name, x, operand, cache):
     c = k.get(name)
     if c is None:
         return None
-    if k["free"][name]:
-        return ops.mul(c, x)
+    if k["free"][name] or operand is None:
+        return ops.mul(c, x)                                   # a shift, or a product of x as it is
     if operand not in cache:
         cache[operand] = ops.rq(x, operand)                    # the 18-bit operand of the product
     return ops.mul(c, cache[operand])
@@ -272,10 +277,27 @@ def _sum(ops, k, terms):
     return out
 
 
-def predict_sums(ops, k, x):
-    """F x, one exact sum per state."""
-    n, cache = k["n"], {}
-    return [_sum(ops, k, [_term(ops, k, f"F{i}{j}", x[j], f"xo{j + 1}", cache) for j in range(n)]) for i in range(n)]
+def predict_operands(ops, k, x):
+    """``{j: xo_j}``: each state that a constant of F other than 0 or +-2**k multiplies, rounded
+    into the operand ``xo<j>`` of those products."""
+    n = k["n"]
+    return {j: ops.rq(x[j], f"xo{j + 1}") for j in range(n)
+            if any(f"F{i}{j}" in k and not k["free"][f"F{i}{j}"] for i in range(n))}
+
+
+def predict_terms(ops, k, x, xo):
+    """The terms F_ij x_j of F x, each exact (a shift, or F_ij times the operand ``xo[j]``);
+    ``None`` where F_ij is 0."""
+    n = k["n"]
+    return [[_term(ops, k, f"F{i}{j}", x[j], f"xo{j + 1}", {f"xo{j + 1}": xo[j]} if j in xo else {})
+             for j in range(n)] for i in range(n)]
+
+
+def predict_sums(ops, k, x, terms=None):
+    """F x, one exact sum per state (from the terms of :func:`predict_terms`, when given)."""
+    if terms is None:
+        terms = predict_terms(ops, k, x, predict_operands(ops, k, x))
+    return [_sum(ops, k, row) for row in terms]
 
 
 def predict(ops, k, x):
@@ -332,10 +354,16 @@ def covariance_fp(ops, k, p):
 
 
 def covariance_sums(ops, k, fp):
-    """(F P) F^T + G Q G^T, exact, the upper triangle."""
+    """(F P) F^T + G Q G^T, exact, the upper triangle; an entry (F P)_ic that a constant of F
+    multiplies is first rounded into the operand ``fp<i><c>`` (a shift takes it exact)."""
     n = k["n"]
-    return {(i, j): _sum(ops, k, [_term(ops, k, f"F{j}{c}", fp[i][c], None, {}) for c in range(n)]
-                         + [k.get(f"GQG{i}{j}")]) for i in range(n) for j in range(i, n)}
+    out = {}
+    for i in range(n):
+        cache = {}
+        for j in range(i, n):
+            terms = [_term(ops, k, f"F{j}{c}", fp[i][c], f"fp{i + 1}{c + 1}", cache) for c in range(n)]
+            out[(i, j)] = _sum(ops, k, [*terms, k.get(f"GQG{i}{j}")])
+    return out
 
 
 def covariance_predict(ops, k, p):
@@ -420,7 +448,7 @@ def _matrix_constants(params):
     for i, row in enumerate(params.F):
         for j, v in enumerate(row):
             if v != 0:
-                out[f"F{i}{j}"] = Constant(v, exact_format(v) if free(v) else "f", f"F[{i}][{j}]")
+                out[f"F{i}{j}"] = Constant(v, exact_format(v) if free(v) else f"f{i + 1}{j + 1}", f"F[{i}][{j}]")
                 flags[f"F{i}{j}"] = free(v)
     for j, row in enumerate(params.H):
         for i, v in enumerate(row):
@@ -482,15 +510,6 @@ def _steady_applies(params):
     return None
 
 
-def _full_applies(params):
-    for i, row in enumerate(params.F):
-        for j, v in enumerate(row):
-            if not free(v):
-                return (f"model.F[{i}][{j}] = {v!r}: the time-varying variant needs F's entries to be 0 or +-2**k "
-                        "(its products by F are then shifts); with this F use the steady variant")
-    return None
-
-
 def _full_settled(params):
     """The covariance the time-varying gain settles to: P and Pl, upper triangles."""
     try:
@@ -507,9 +526,16 @@ def _full_settled(params):
 
 
 def _full_hardware(params):
+    """Whether the parallel time-varying core runs these parameters: one observation, and F's
+    entries 0 or +-2**k (its products by F are shifts); the sequential core runs any."""
     if params.m != 1:
-        return (f"the time-varying variant with {params.m} observations is model-only (compare, sweep, filter, "
-                "formats): its core takes one observation; use the steady variant for hardware")
+        return (f"the parallel time-varying core takes one observation, not {params.m}: the sequential core runs "
+                "this model")
+    for i, row in enumerate(params.F):
+        for j, v in enumerate(row):
+            if not free(v):
+                return (f"model.F[{i}][{j}] = {v!r}: the parallel time-varying core needs F's entries to be 0 or "
+                        "+-2**k (its products by F are shifts); the sequential core runs this model")
     return None
 
 
@@ -526,7 +552,7 @@ VARIANTS = {
     "steady": Variant("steady", "constant gain K from the Riccati equation (or given): no divider",
                       _steady_state, _steady_constants, _initial, steady_update, _steady_applies),
     "full": Variant("full", "time-varying gain: P, S and a restoring divider per update (two observations: "
-                            "model only)", _full_state, _full_constants, _full_initial, full_update, _full_applies,
+                            "model only)", _full_state, _full_constants, _full_initial, full_update, lambda params: None,
                     _full_hardware, _full_settled),
 }
 
@@ -535,12 +561,19 @@ def _points_for(params):
     n, m = params.n, params.m
     names = [f"x{i + 1}" for i in range(n)] + [f"xl{i + 1}" for i in range(n)]
     names += [f"yh{j + 1}" for j in range(m)] + [f"e{j + 1}" for j in range(m)] + [f"k{i + 1}" for i in range(n)]
-    if any(not free(v) for row in params.F for v in row):
-        names += ["f"] + [f"xo{j + 1}" for j in range(n) if any(not free(params.F[i][j]) for i in range(n))]
+    names += [f"f{i + 1}{j + 1}" for i in range(n) for j in range(n) if not free(params.F[i][j])]
+    names += [f"xo{j + 1}" for j in range(n) if any(not free(params.F[i][j]) for i in range(n))]
     tri = [(i, j) for i in range(n) for j in range(i, n)]
     names += [f"p{i + 1}{j + 1}" for i, j in tri] + [f"pl{i + 1}{j + 1}" for i, j in tri]
+    names += [f"fp{i + 1}{c + 1}" for i in range(n) for c in range(n) if _fp_rounded(params, i, c)]
     names += ["s"] if m == 1 else ["s11", "s12", "s22", "det", "kn"]
     return [p for p in POINTS if p in names]
+
+
+def _fp_rounded(params, i, c):
+    """Whether (F P)_ic is rounded into an operand: a constant of F that is not 0 or +-2**k
+    multiplies it in (F P) F^T (an entry F_jc, j >= i)."""
+    return any(not free(params.F[j][c]) for j in range(i, params.n))
 
 
 def _all_points():
@@ -556,12 +589,19 @@ def _all_points():
     for i in range(1, MAX_STATES + 1):
         pts.append(Point(f"k{i}", f"gains of state {i}: row {i} of K (constants, or the divider's quotients)",
                          role="operand"))
-    pts.append(Point("f", "entries of F that are not 0 or +-2**k (constants)", role="operand", constant=True))
+    for i in range(1, MAX_STATES + 1):
+        for j in range(1, MAX_STATES + 1):
+            pts.append(Point(f"f{i}{j}", f"F[{i - 1}][{j - 1}], when it is not 0 or +-2**k (a constant)", role="operand",
+                             constant=True))
     for j in range(1, MAX_STATES + 1):
         pts.append(Point(f"xo{j}", f"state x{j} rounded into the operand of its products by F", role="operand"))
     for i in range(1, MAX_STATES + 1):
         for j in range(i, MAX_STATES + 1):
             pts.append(Point(f"p{i}{j}", f"covariance P{i}{j} (state)", variants=("full",), frac=f"pl{i}{j}"))
+    for i in range(1, MAX_STATES + 1):
+        for j in range(1, MAX_STATES + 1):
+            pts.append(Point(f"fp{i}{j}", f"(F P){i}{j} rounded into the operand of its products by F (time-varying)",
+                             role="operand", variants=("full",)))
     for i in range(1, MAX_STATES + 1):
         for j in range(i, MAX_STATES + 1):
             pts.append(Point(f"pl{i}{j}", f"predicted covariance Pl{i}{j}", role="operand", variants=("full",)))
@@ -627,6 +667,29 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
         want = min(max(e.frac_bits, need), max(e.frac_bits, state_frac))
         if want > e.frac_bits:
             formats[f"e{j + 1}"] = QFormat(e.int_bits, want, e.rounding, e.overflow)
+    # the predicted covariance that feeds the division: its guard bits, and P as fine
+    for i in range(params.n):
+        for j in range(i, params.n):
+            name = f"pl{i + 1}{j + 1}"
+            if name in formats:
+                pl = formats[name]
+                frac = covariance_frac(pl)
+                formats[name] = QFormat(pl.int_bits, frac, pl.rounding, pl.overflow)
+                p = formats[f"p{i + 1}{j + 1}"]
+                if p.frac_bits < frac:
+                    formats[f"p{i + 1}{j + 1}"] = QFormat(p.int_bits, frac, p.rounding, p.overflow)
+    if params.m == 1 and "s" in formats and "pl11" in formats and formats["s"].frac_bits < formats["pl11"].frac_bits:
+        s = formats["s"]  # S = H Pl H^T + R as fine as Pl
+        formats["s"] = QFormat(s.int_bits, formats["pl11"].frac_bits, s.rounding, s.overflow)
+    # (F P)_ic feeds Pl_ij through F_jc: as fine as the finest of those, two bits finer
+    for i in range(params.n):
+        for c in range(params.n):
+            name = f"fp{i + 1}{c + 1}"
+            if name in formats:
+                fine = max(formats[f"pl{min(i, j) + 1}{max(i, j) + 1}"].frac_bits for j in range(i, params.n)) + 2
+                fp = formats[name]
+                if fine > fp.frac_bits:
+                    formats[name] = QFormat(fp.int_bits, min(fine, MAX_OPERAND_BITS - fp.int_bits), fp.rounding, fp.overflow)
     # a predicted observation that is one predicted state (H selects it) keeps that state's format:
     # then it is no extra logic
     for j, row in enumerate(params.H):
@@ -655,7 +718,7 @@ def _validate(config):
 
 
 def _goals(config, variant, channels=1):
-    """Logic cells per state and observation; every multiplier the model needs; 75 MHz."""
+    """Logic cells per state and observation; every multiplier the model needs; the board's timing goal."""
     params = config.params
     n, m = params.n, params.m
     # every product of the update on its own embedded multipliers (steady), or all on one (full);
@@ -663,9 +726,9 @@ def _goals(config, variant, channels=1):
     report = config.width_report(variant)
     if variant == "steady":
         return {"logic_cells": 250 * n + 150 * m + 150 * n * (channels - 1), "mul18": report.blocks(),
-                "lut_levels": 16, "worst_path_ns": round(1000.0 / 75.0, 2)}
+                "lut_levels": 16, "worst_path_ns": WORST_PATH_GOAL_NS}
     return {"logic_cells": 900 * n + 300 * n * (channels - 1), "mul18": report.widest_product_blocks(),
-            "lut_levels": 16, "worst_path_ns": round(1000.0 / 75.0, 2)}
+            "lut_levels": 16, "worst_path_ns": WORST_PATH_GOAL_NS}
 
 
 def _random_params(rng):
@@ -690,28 +753,63 @@ def _random_params(rng):
                             x0=tuple(float(v) for v in rng.normal(0, 20, n)), T=t)
 
 
+def _sine_truth(params, count):
+    """Noise-free states for the ``sine`` scenario: an axis is a chain of states, each the
+    derivative of the one before through F (``x_i(k+1) = x_i(k) + F_i,i+1 x_i+1(k) + ...``); the first
+    state of every axis that an observation sees gets a sine (the axes a quarter period apart, so
+    that every one moves), and the states down its chain the derivatives that link implies."""
+    from kfpga.model import scenarios
+
+    k = np.arange(count)
+    w = 2 * np.pi / scenarios.SINE_PERIOD
+    truth = np.zeros((params.n, count))
+    observed = {}  # state -> the H entry that sees it
+    for row in params.H:
+        state = next(i for i, h in enumerate(row) if h != 0)
+        observed.setdefault(state, row[state])
+    waves, axes = {}, 0  # state -> (amplitude, phase)
+    for i in range(params.n):
+        if i > 0 and i - 1 in waves and params.F[i - 1][i] != 0:  # the derivative of the state before
+            a, phase = waves[i - 1]
+            waves[i] = (a * w / params.F[i - 1][i], phase + np.pi / 2)
+        elif i in observed:  # the first state of an axis
+            waves[i] = (scenarios.SINE_AMPLITUDE / abs(observed[i]), axes * np.pi / 2)
+            axes += 1
+    for i, (a, phase) in waves.items():
+        truth[i] = a * np.sin(w * k + phase)
+    return truth
+
+
+def _model_truth(params, count, rng):
+    """States drawn from the model itself, ``x(k+1) = F x(k) + G w``, ``w ~ N(0, Q)`` from 0, scaled
+    (all of them by one factor) when the observations would pass 3/4 of the ADC's range."""
+    from kfpga.core.ads8364 import CODE_MAX
+
+    f, g = np.array(params.F), np.array(params.G)
+    lam, vec = np.linalg.eigh(np.array(params.Q))
+    root = vec @ np.diag(np.sqrt(np.clip(lam, 0.0, None)))  # Q^1/2 (Q may be singular)
+    w = rng.normal(0.0, 1.0, (count, len(lam))) @ root.T @ g.T
+    truth = np.empty((params.n, count))
+    x = np.zeros(params.n)
+    for step in range(count):
+        truth[:, step] = x
+        x = f @ x + w[step]
+    peak = float(np.max(np.abs(np.array(params.H) @ truth))) if count else 0.0
+    limit = 0.75 * CODE_MAX
+    return truth * (limit / peak) if peak > limit else truth
+
+
 def _scenario(name, count, seed, params):
-    """The scenarios of ``model/scenarios.py`` for the first state (a position, an angle), its
-    derivatives for the others, each observation its row of H plus noise of variance R_jj."""
+    """``sine``: each observation a sine (:func:`_sine_truth`); ``model`` (and ``random-accel``, its
+    other name here): the model's own process (:func:`_model_truth`). Each observation is its row of
+    H plus noise of variance R_jj. Returns the truth of x1 and the codes."""
     from kfpga.model import scenarios
 
     rng = np.random.default_rng(seed)
     if name == "sine":
-        k = np.arange(count)
-        w = 2 * np.pi / scenarios.SINE_PERIOD
-        a = scenarios.SINE_AMPLITUDE
-        # per sample: x1 = a sin(w k), x2 = x1 per unit time (T), x3 = x2 per unit time
-        truth = np.stack([a * (w / params.T) ** d * np.sin(w * k + d * np.pi / 2) for d in range(params.n)])
-    elif name == "random-accel":
-        t, q = params.T, float(np.array(params.Q)[0, 0])
-        truth = np.zeros((params.n, count))
-        x = np.zeros(params.n)
-        f = np.array(params.F)
-        g = np.array(params.G)[:, 0]
-        for step in range(count):
-            truth[:, step] = x
-            x = f @ x + g * rng.normal(0.0, np.sqrt(q))
-            x *= 1 - 1e-3 * t  # a weak pull toward zero keeps the track within the ADC range
+        truth = _sine_truth(params, count)
+    elif name in ("model", "random-accel"):
+        truth = _model_truth(params, count, rng)
     else:
         raise ValueError(f"scenario must be one of {', '.join(scenarios.SCENARIOS)}, not {name!r}")
     h, r = np.array(params.H), np.array(params.R)

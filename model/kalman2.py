@@ -40,7 +40,8 @@ import numpy as np
 
 from kfpga.core.board import WORST_PATH_GOAL_NS
 from kfpga.core.errors import ConfigError
-from kfpga.core.formats import register_formats
+from kfpga.core.fixed import QFormat
+from kfpga.core.formats import covariance_frac, register_formats
 from kfpga.core.spec import Constant, FilterSpec, MutationBlock, Output, Variant
 from kfpga.model.cvloop import (
     POINTS,
@@ -196,6 +197,14 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
     noise = ({"x1": min(err["x1"], err["yhat"]), "v": params.T * err["x2"], "vt": params.T * err["x2"], "x2": err["x2"]}
              if err else None)
     formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, noise=noise)
+    # the predicted covariance that feeds the division: its guard bits, and P and S as fine
+    pl = formats["pl"]
+    frac = covariance_frac(pl)
+    formats["pl"] = QFormat(pl.int_bits, frac, pl.rounding, pl.overflow)
+    for name in ("p", "s"):
+        f = formats[name]
+        if f.frac_bits < frac:
+            formats[name] = QFormat(f.int_bits, frac, f.rounding, f.overflow)
     return finish_formats(params, formats, state_frac=state_frac)
 
 
@@ -236,8 +245,8 @@ def _random_params(rng):
 def _goals(config, variant, channels=1):
     """The steady core: the constant-gain loop's (:func:`~kfpga.model.cvloop.steady_goals`). The
     time-varying core: 2,000 logic cells for one channel, about 300 more per further channel
-    state (three cells per state bit of its six registers: 119 bits). Every path within 13.33 ns
-    (75 MHz estimated)."""
+    state (three cells per state bit of its six registers: 119 bits). Every path within the board's
+    timing goal (62.5 MHz estimated)."""
     if variant == "steady":
         return steady_goals(config, channels)
     return {"logic_cells": 2000 + 300 * (channels - 1), "mul18": 12, "lut_levels": 16,

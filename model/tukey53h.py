@@ -327,7 +327,7 @@ def _goals(config, variant, channels=1):
     """No multiplier; 1,400 logic cells for one channel (11 comparators and their multiplexers,
     14 pipeline stages), each further channel about two cells per state bit (its registers,
     their read multiplexer and write enable: 260 for the 8 samples and the flag); every path
-    within 13.33 ns (75 MHz estimated), the Kalman cores' goal."""
+    within the board's timing goal (62.5 MHz estimated)."""
     return {"logic_cells": 1400 + 260 * (channels - 1), "mul18": 0, "lut_levels": 10, "worst_path_ns": WORST_PATH_GOAL_NS}
 
 

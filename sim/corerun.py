@@ -183,7 +183,7 @@ class CoreBuild:
     cycles_per_update: int
 
 
-def build(simulator, *, config=None, variant=None, channels=1, root=DEFAULT_ROOT):
+def build(simulator, *, config=None, variant=None, channels=1, architecture=None, root=DEFAULT_ROOT):
     """Generate and compile ``kfpga_core_cosim`` for one core (cached by content)."""
     from kfpga.hw.generate import figures_only, write_block
     from kfpga.sim import hdl
@@ -195,13 +195,14 @@ def build(simulator, *, config=None, variant=None, channels=1, root=DEFAULT_ROOT
     widths = (sum(f[2] for f in in_fields), sum(f[2] for f in out_fields))
 
     def write(folder):
-        write_block(folder, "core", config, variant=variant, channels=channels)
+        write_block(folder, "core", config, variant=variant, channels=channels, architecture=architecture)
         (folder / f"{CORE_COSIM}.v").write_text(core_wrapper(in_fields, out_fields, *widths))
         (folder / f"{CORE_COSIM}_clock.v").write_text(hdl.clock_top(CORE_COSIM))
         return sorted(folder.glob("*.v"))
 
     build_dir, command = compile_cached(simulator, f"core-{variant}-{channels}", write, CORE_COSIM, root=root)
-    cycles = figures_only(config.spec.make_core(config, variant, channels=channels)).cycles_per_update
+    cycles = figures_only(config.spec.make_core(config, variant, channels=channels,
+                                                architecture=architecture)).cycles_per_update
     return CoreBuild(simulator, build_dir, command, config, variant, channels, in_fields, out_fields, cycles)
 
 

@@ -47,10 +47,12 @@ def _design_verilog(out_dir, design, config, opts):
     """Write the Verilog of ``design`` into ``out_dir``; returns ``(path, toplevel)``."""
     if design == "top":
         path, _ = write_top(out_dir, config, variant=opts["variant"], six_channel=opts.get("six", False),
-                            channel=opts.get("channel"))
+                            channel=opts.get("channel"), architecture=opts.get("architecture"), stages=opts.get("stages"))
         return path, TOP_NAME
     if design == "core":
-        path, _ = write_block(out_dir, "core", config, variant=opts["variant"], channels=opts.get("channels", 1))
+        path, _ = write_block(out_dir, "core", config, variant=opts["variant"], channels=opts.get("channels", 1),
+                              architecture=opts.get("architecture"),
+                              **({"stages": opts["stages"]} if opts.get("stages") is not None else {}))
     elif design == "divider":
         path, _ = write_block(out_dir, "divider", ratio=opts.get("ratio", 10))
     elif design == "frontend":

@@ -63,6 +63,7 @@ def scenario_source(name, n, seed, params=None, *, glitches=None, config=None, a
         return _spec_source(name, n, seed, config, adc, glitches)
     params = KalmanParams() if params is None else params
     truth, y = scenarios.make(name, n + 6 * 337, seed, params, batch=(6,))
+    scenarios.check_rails(name, y)
     # shift channel c by c * 337 samples: distinct waveforms from one seeded run
     shifted = np.stack([y[c, c * 337: c * 337 + n] for c in range(6)])
     truths = np.stack([truth[c, c * 337: c * 337 + n] for c in range(6)])
@@ -74,6 +75,7 @@ def _spec_source(name, n, seed, config, adc, glitches):
     first = None
     for c in range(6):
         truth, y = config.spec.scenario(name, n, seed + 1009 * c, config.params)
+        scenarios.check_rails(name, y)
         first = (truth, y) if first is None else first
         codes[c] = next(iter(y.values())) if isinstance(y, dict) else y
         truths[c] = truth

@@ -304,16 +304,24 @@ class SystemBuild:
     six: bool
     channel: int | None
     prefilter: FilterConfig | None = None
+    architecture: str | None = None
+    stages: int | None = None
+
+    @property
+    def core_options(self):
+        return {"architecture": self.architecture, **({} if self.stages is None else {"stages": self.stages})}
 
 
-def write_sources(out_dir, config, *, variant, six=False, channel=None, prefilter=None):
+def write_sources(out_dir, config, *, variant, six=False, channel=None, prefilter=None, architecture=None,
+                  stages=None):
     """The generated top, the ADC model and ``kfpga_cosim`` (and its clock top) in ``out_dir``."""
     from kfpga.hw.generate import TOP_NAME, write_top
     from kfpga.hw.top import out_width
     from kfpga.sim import hdl
 
     out_dir = Path(out_dir)
-    _, top = write_top(out_dir, config, variant=variant, six_channel=six, channel=channel, prefilter=prefilter)
+    _, top = write_top(out_dir, config, variant=variant, six_channel=six, channel=channel, prefilter=prefilter,
+                       architecture=architecture, stages=stages)
     hdl.write_model(out_dir)
     (out_dir / f"{hdl.COSIM_NAME}.v").write_text(hdl.cosim_wrapper(TOP_NAME, out_width(config, top.out_field)))
     (out_dir / f"{hdl.COSIM_NAME}_clock.v").write_text(hdl.clock_top(hdl.COSIM_NAME))
@@ -374,19 +382,22 @@ def compile_cached(simulator, tag, write, top, *, root=DEFAULT_ROOT):
     return build_dir, [str(Path(iverilog_path()).with_name("vvp")), "-n", str(build_dir / "sim.vvp")]
 
 
-def build(simulator, *, config=None, variant=None, six=False, channel=None, prefilter=None, root=DEFAULT_ROOT):
+def build(simulator, *, config=None, variant=None, six=False, channel=None, prefilter=None, architecture=None,
+          stages=None, root=DEFAULT_ROOT):
     """Generate and compile ``kfpga_cosim`` for ``simulator`` (cached by content under
     ``build/sim/<simulator>/system-<hash>``); returns a :class:`SystemBuild`. ``prefilter``: the
-    config of a 53H smoother between the controller and the core."""
+    config of a filter between the controller and the core; ``architecture``: the core's."""
     from kfpga.sim import hdl
 
     config = FilterConfig() if config is None else config
     variant = variant or config.spec.default_variant
     build_dir, command = compile_cached(
         simulator, "system", lambda folder: write_sources(folder, config, variant=variant, six=six, channel=channel,
-                                                          prefilter=prefilter),
+                                                          prefilter=prefilter, architecture=architecture,
+                                                          stages=stages),
         hdl.COSIM_NAME, root=root)
-    return SystemBuild(simulator, build_dir, command, config, variant, bool(six), channel, prefilter)
+    return SystemBuild(simulator, build_dir, command, config, variant, bool(six), channel, prefilter, architecture,
+                       stages)
 
 
 class _Records(SystemRecords):
@@ -472,12 +483,17 @@ def run(built, *, params, samples, on_progress=None, tag=None, timeout_s=None):
 def cycle_budget(built, records, samples):
     """System cycles a run may take before it is stopped: generous, as a conversion with one
     read takes 230 system cycles, six reads 380 (for six estimates); a core slower than that
-    (the sequential core: hundreds of cycles an update) paces the reads, and gets twice its own."""
+    (the sequential core: hundreds of cycles an update) paces the reads, and gets twice its own;
+    a conversion timer adds its period to each conversion."""
     from kfpga.hw.generate import figures_only
 
-    per_sample = 600 if len(records.adc_channels) > 1 else 300
-    core = figures_only(built.config.spec.make_core(built.config, built.variant, channels=6 if built.six else 1))
-    return max(per_sample, 2 * core.cycles_per_update + 60) * samples + 20000
+    base = 600 if len(records.adc_channels) > 1 or built.six else 300
+    core = figures_only(built.config.spec.make_core(built.config, built.variant, channels=6 if built.six else 1,
+                                                    **built.core_options))
+    estimates = 6 if built.six else 1  # per conversion
+    period = built.config.board.period_cycles() or 0  # the conversion timer's
+    per_conversion = max(base, estimates * (2 * core.cycles_per_update + 60)) + period
+    return per_conversion * -(-samples // estimates) + 20000
 
 
 class _AdcCounts(NamedTuple):

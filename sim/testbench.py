@@ -155,14 +155,16 @@ def icarus_command(out_dir="."):
             ["vvp", "-n", f"{TB_NAME}.vvp"])
 
 
-def write_testbench(out_dir, config, *, variant, six=False, channel=None, samples=2000, params=None, prefilter=None):
+def write_testbench(out_dir, config, *, variant, six=False, channel=None, samples=2000, params=None, prefilter=None,
+                    architecture=None, stages=None):
     """Write the testbench folder (see the module's text); returns a dict describing it."""
     from kfpga.hw.generate import write_top
     from kfpga.hw.top import out_width
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    _, top = write_top(out_dir, config, variant=variant, six_channel=six, channel=channel, prefilter=prefilter)
+    _, top = write_top(out_dir, config, variant=variant, six_channel=six, channel=channel, prefilter=prefilter,
+                       architecture=architecture, stages=stages)
     (out_dir / "verilator_lint.vlt").unlink(missing_ok=True)
     hdl.write_model(out_dir)
     params = {**(params or {}), "variant": variant, "six": six, "config_toml": config.to_toml()}

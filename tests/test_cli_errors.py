@@ -97,12 +97,13 @@ CASES = [
      {"p.csv": "port,bit,pin,io_standard\nclk50,,PIN_34,3.3-V LVTTL\n"}, None),
     ("pins-wide-x1", ["generate", "--out", "o", "--config", "k.toml", "--no-lint"],
      {"k.toml": '[formats.x1]\nformat = "Q30.10"\n[formats.xl1]\nformat = "Q30.10"\n'}, None),
-    ("va2-full-generate", ["generate", "--preset", "va2", "--variant", "full", "--out", "o"], {},
-     "the time-varying variant with 2 observations is model-only (compare, sweep, filter, formats): its core takes "
-     "one observation; use the steady variant for hardware"),
-    ("va2-full-simulate", ["simulate", "--preset", "va2", "--variant", "full"], {},
-     "the time-varying variant with 2 observations is model-only (compare, sweep, filter, formats): its core takes "
-     "one observation; use the steady variant for hardware"),
+    ("va2-full-generate", ["generate", "--preset", "va2", "--variant", "full", "--architecture", "parallel",
+                           "--out", "o"], {},
+     "--architecture parallel: the parallel time-varying core takes one observation, not 2: the sequential core "
+     "runs this model"),
+    ("va2-full-simulate", ["simulate", "--preset", "va2", "--variant", "full", "--architecture", "parallel"], {},
+     "--architecture parallel: the parallel time-varying core takes one observation, not 2: the sequential core "
+     "runs this model"),
     ("pins-write-dir", ["pins", "--write", "d"], {"d/x": ""}, "--write d: is a directory; give a file name"),
     ("formats-toml-and-json", ["formats", "--toml", "--json"], {}, "--toml and --json are two ways to print the same: choose one"),
     ("formats-pin-without-toml", ["formats", "--pin-formats"], {},

@@ -128,7 +128,7 @@ def test_unknown_keys_are_rejected():
             "formats.x3: unknown quantisation point; known: x1, xl1, v, x2, e, gain, p, pl, s, inv_t, vt")):
         KalmanConfig.from_dict({"formats": {"x3": "Q4.4"}})
     with pytest.raises(ConfigError, match=exactly(
-            "config: unknown section(s) modle; expected [filter], [model] and [formats.*]")):
+            "config: unknown section(s) modle; expected [filter], [model], [formats.*] and [board]")):
         KalmanConfig.from_dict({"modle": {}})
     with pytest.raises(ConfigError, match=exactly("formats.x1: rounding must be one of nearest, round, convergent, "
                                                   "floor, fix (half_up: nearest), not 'up'")):

@@ -93,22 +93,24 @@ def test_time_varying_core_takes_at_most_200_cycles_for_three_states():
     assert dut.cycles_per_update <= 200
 
 
-def test_two_observations_are_model_only_for_the_time_varying_core():
-    with pytest.raises(ValueError, match=r"^the time-varying variant with 2 observations is model-only \(compare, "
-                                         r"sweep, filter, formats\): its core takes one observation; use the steady "
-                                         r"variant for hardware$"):
-        FullCore(preset_config("va2"))
+def test_two_observations_run_on_the_sequential_core_only_for_the_time_varying_variant():
+    config = preset_config("va2")
+    with pytest.raises(ValueError, match=r"^the parallel time-varying core takes one observation, not 2: the "
+                                         r"sequential core runs this model$"):
+        FullCore(config)
+    assert config.spec.architectures("full", config.params) == ("sequential",)
 
 
 def test_steady_loop_stages():
-    """Three-term rows of F (ca3) get a stage for their sum and one for its rounding."""
+    """Three-term rows of F (ca3) get a stage for their sum and one for its rounding by default; up to
+    seven (eight with two observations) when the products by F get stages of their own."""
     ca3, cv2 = preset_config("ca3"), FilterConfig(filter="kalman")
     assert default_stages(ca3.params) == 5 and default_stages(cv2.params) == 4
     assert SteadyCore(ca3).cycles_per_update == 5
-    for stages in range(1, 6):
+    for stages in range(1, 8):
         assert SteadyCore(ca3, stages=stages).cycles_per_update == stages
-    with pytest.raises(ValueError, match="stages must be one of 1, 2, 3, 4, 5, not 6"):
-        SteadyCore(ca3, stages=6)
+    with pytest.raises(ValueError, match="stages must be one of 1, 2, 3, 4, 5, 6, 7, not 8"):
+        SteadyCore(ca3, stages=8)
 
 
 @pytest.mark.parametrize("stages", [1, 2, 3])

@@ -122,12 +122,6 @@ def toy_reference(params, variant, y):
     return {"x": out}
 
 
-def toy_core(config, variant, *, channels=1, stages=None):
-    from kfpga.hw.sequencer import SequentialCore
-
-    return SequentialCore(config, variant, channels=channels)
-
-
 def _toy_run(options, seed):
     rng = np.random.default_rng(seed)
     y = np.round(1000 + rng.normal(0, 20, 2000))
@@ -158,7 +152,7 @@ TOY = FilterSpec(
         TOY, params, list(TOY_VARIANTS.values()), full_scale_stimulus(params.R) if stimulus is None else stimulus),
     validate=lambda config: None,
     reference=toy_reference,
-    core=toy_core,
+    core=None,  # no parallel core of its own: the sequential core runs it
     goals=lambda config, variant, channels=1: {"logic_cells": 3000, "mul18": 4},
     default_output="x",
     random_params=lambda rng: ToyParams(alpha=float(rng.uniform(0.05, 0.9))),
@@ -187,7 +181,7 @@ def test_a_toy_filter_gets_the_generic_commands(toy, tmp_path, capsys, seed):
     src.write_text("y\n" + "\n".join(str(v) for v in range(0, 400, 7)) + "\n")
     assert main(["filter", "--filter", "toy", "--input", str(src), "--output", str(out)]) == 0
     assert out.read_text().splitlines()[0].split(",")[:1] == ["x"]
-    assert main(["generate", "--filter", "toy", "--out", str(tmp_path / "gen")]) == 0
+    assert main(["generate", "--filter", "toy", "--out", str(tmp_path / "gen"), "--quiet"]) == 0
     assert (tmp_path / "gen" / "kfpga_top.v").exists()
     capsys.readouterr()
     assert main(["evaluate", "toy", "--seed", str(seed), "--json"]) == 0
@@ -198,8 +192,9 @@ def test_a_toy_filter_gets_the_generic_commands(toy, tmp_path, capsys, seed):
 def test_a_toy_filter_passes_the_contract(toy, tmp_path, seed):
     from tests.contract import test_contract as contract
 
+    assert TOY.architectures("steady", ToyParams()) == ("sequential",)
     contract.test_model_equals_the_exact_rational_spec("toy", "steady", seed)
     for channels in (1, 3):
-        contract.test_rtl_equals_model_with_backpressure("toy", "steady", channels, seed)
-    contract.test_declared_latency_and_cycles_per_update_are_measured("toy", "steady")
-    contract.test_generated_verilog_parses_and_lints("toy", "steady", tmp_path)
+        contract.test_rtl_equals_model_with_backpressure("toy", "steady", "sequential", channels, seed)
+    contract.test_declared_latency_and_cycles_per_update_are_measured("toy", "steady", "sequential")
+    contract.test_generated_verilog_parses_and_lints("toy", "steady", "sequential", tmp_path)

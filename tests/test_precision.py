@@ -1,9 +1,11 @@
 """Word lengths that are right for the model: constants held within 1 %, precision-aware defaults.
 
-The grid of the issue: T in {0.001, 0.01, 0.1, 1, 8}, Q in {0.01, 2, 100}, R in {0.01, 4, 1000}
-on the paper's model (cv2) and the constant-acceleration model (ca3): the default formats either
-give a fixed RMSE of x1 and of x2 within 1 % of float's, with no overflow, or the config is refused with
-one line that names the point (or says why the variant does not apply).
+The grid: T in {0.001, 0.01, 0.1, 1, 8}, Q in {0.01, 2, 100}, R in {0.01, 4, 1000} on the paper's
+model (cv2) and the constant-acceleration model (ca3), both variants: the default formats give a
+fixed RMSE of x1 and of x2 within 1 % of float's, with no overflow. The defaults add the bits
+every constant needs; the only refusal left is a time-varying variant whose covariance spans more
+than the 62 bits the model holds exactly (its steady variant then runs), in one line naming the
+formats.
 """
 
 import itertools
@@ -34,9 +36,8 @@ def config_for(model, t, q, r):
     return FilterConfig(filter="kalman", params=ca3(t, q, r))
 
 
-REFUSAL = re.compile(r"^(the (constant .+|reset value of \w+) = \S+ (rounds to 0|is held as \S+) in formats\.(\w+) = "
-                     r"Q\d+\.\d+.*: \4 needs at least \d+ fraction bits to hold it within 1 % \((steady|full) variant\)"
-                     r"|model\.F\[\d\]\[\d\] = .*: the time-varying variant needs F's entries to be 0 or \+-2\*\*k .*)$")
+REFUSAL = re.compile(r"^the full variant of this model needs wider sums than its default formats allow: .* formats\.\w+ "
+                     r"= Q\d+\.\d+.*another variant runs it$")
 
 
 @pytest.mark.slow
@@ -64,17 +65,20 @@ def test_defaults_are_within_one_percent_or_refused_naming_the_point(model, vari
         ratio = rmse(fixed, rate[100:]) / rmse(flt, rate[100:])
         assert abs(ratio - 1) <= 0.01, (where, "x2", ratio)
         passed.append(where)
-    assert passed, refused  # T = 1 and T = 8 (F's entries powers of two) run for every model
+    assert not (variant == "steady" and refused), refused  # the steady variant always runs
+    assert len(passed) >= 0.8 * len(GRID), refused
 
 
-def test_the_millisecond_case_is_refused_naming_pl():
+def test_the_millisecond_case_gets_the_bits_it_needs(seed):
+    """T = 0.001: T^2 Q = 2e-06 needs 25 fraction bits in pl, which the default gives it (pl grows past
+    the multiplier's 18 bits); both variants run within 1 % of float."""
     config = FilterConfig.from_dict({"model": {"T": 0.001}})
-    with pytest.raises(ConfigError, match=re.escape(
-            "the constant T^2*Q = 2e-06 rounds to 0 in formats.pl = Q5.13 (LSB 0.000122): pl needs at least 25 "
-            "fraction bits to hold it within 1 % (full variant)")):
-        config.require_variant("full")
-    config.require_variant("steady")  # its gains get the bits they need: gain Q1.17
-    assert str(config.formats["gain"]) == "Q1.17"
+    assert config.formats["pl"].frac_bits >= 25 and str(config.formats["gain"]) == "Q1.17"
+    truth, y = for_config("sine", 5000, seed, config)
+    for variant in ("steady", "full"):
+        config.require_variant(variant)
+        m = compare(config, variant, y, truth, limit_cycle=False).metrics
+        assert m["overflows"] == 0 and abs(m["rmse_fixed_over_float"] - 1) <= 0.01, (variant, m["rmse_fixed_over_float"])
 
 
 def test_a_pinned_format_that_loses_a_constant_is_refused():

@@ -21,9 +21,10 @@ def run(capsys, *argv):
 
 @pytest.fixture(scope="module")
 def proposal(tmp_path_factory):
-    """The paper's steady filter, proposed on a short sine (the module's tests share it)."""
+    """The paper's filter, both variants, proposed on a short sine over four seeds (the module's tests
+    share it)."""
     out = tmp_path_factory.mktemp("propose") / "p.toml"
-    code = main(["propose", "--samples", "4000", "--seed", "3", "--out", str(out), "--quiet", "--json"])
+    code = main(["propose", "--samples", "4000", "--seed", "3", "--seeds", "4", "--out", str(out), "--quiet", "--json"])
     assert code == 0
     return out
 
@@ -41,9 +42,12 @@ def test_proposal_meets_its_constraints(proposal, capsys, seed):
     m = json.loads(out)
     assert code == 0 and abs(m["rmse_fixed_over_float"] - 1) <= 0.01 and m["overflows"] == 0
     assert m["limit_cycle_lsb"] <= 1.0 and m["dead_band_lsb"] <= 1.0
-    # the points only the time-varying variant writes keep their formats
-    for name in ("p", "pl", "s"):
-        assert config.formats[name] == default.formats[name]
+    # one config serves both variants (the search checked them together): the time-varying one too
+    code, out, _ = run(capsys, "compare", "--config", str(proposal), "--variant", "full", "--samples", "4000", "--seed",
+                       "3", "--json")
+    m = json.loads(out)
+    assert code == 0 and abs(m["rmse_fixed_over_float"] - 1) <= 0.01 and m["overflows"] == 0
+    assert "# worst RMSE change" in text and "seeds 3..6" in text
 
 
 @pytest.mark.cosim
@@ -59,11 +63,15 @@ def test_generate_and_simulate_take_the_proposal(proposal, simulator, capsys, tm
     assert code == 0 and res["mismatches"] == 0 and res["samples"] == 300, err
 
 
-def test_propose_refuses_pinned_formats_and_bad_options(capsys, tmp_path):
+def test_propose_keeps_pinned_formats_and_refuses_bad_options(capsys, tmp_path):
     cfg = tmp_path / "k.toml"
-    cfg.write_text('[formats.x1]\nformat = "Q18.10"\n')
-    code, _, err = run(capsys, "propose", "--config", str(cfg), "--samples", "500")
-    assert code == 2 and err.strip().endswith("propose chooses every format itself, so the formats "
-                                              f"{cfg} pins would be ignored (x1): remove its [formats] tables")
+    cfg.write_text('[formats.x1]\nformat = "Q18.10"\n[formats.xl1]\nformat = "Q18.10"\n')
+    out = tmp_path / "p.toml"
+    code, _, err = run(capsys, "propose", "--config", str(cfg), "--variant", "steady", "--samples", "1500", "--seed",
+                       "1", "--seeds", "2", "--quiet", "--out", str(out))
+    assert code == 0, err
+    proposed = FilterConfig.from_toml(out)
+    assert str(proposed.formats["x1"]) == "Q18.10" and str(proposed.formats["xl1"]) == "Q18.10"
+    assert "pinned by the config (kept)" in out.read_text()
     code, _, err = run(capsys, "propose", "--out", str(tmp_path / "p.txt"), "--samples", "500")
     assert code == 2 and "--out" in err and ".toml" in err

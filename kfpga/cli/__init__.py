@@ -15,6 +15,7 @@ from kfpga.cli import (
     common,
     compare,
     evaluate,
+    explore,
     filter,
     filters,
     formats,
@@ -30,7 +31,8 @@ from kfpga.cli import (
 __all__ = ["main", "build_parser", "synopsis"]
 
 #: The commands in the order ``kfpga --help`` lists them.
-COMMANDS = (compare, sweep, propose, evaluate, filters, filter, formats, generate, pins, resources, simulate, testbench)
+COMMANDS = (compare, sweep, propose, evaluate, filters, filter, formats, explore, generate, pins, resources, simulate,
+            testbench)
 
 
 def build_parser():

@@ -17,6 +17,7 @@ from kfpga.core import registry
 from kfpga.core.errors import UsageError
 
 EXIT_USAGE = 2
+SCENARIO_NAMES = ("sine", "random-accel", "model")
 PLOT_EXTENSIONS = (".png", ".svg", ".pdf")
 
 
@@ -204,12 +205,19 @@ def add_filter_args(p, variant=True):
         p.add_argument("--variant", metavar="NAME", help=variant_help())
 
 
-def add_signal_args(p):
+def add_signal_args(p, *, files=False):
+    """--scenario, --input (``files``: repeatable), --clip, --samples, --seed, --config, --settle."""
     add_filter_args(p)
-    p.add_argument("--scenario", choices=("sine", "random-accel"),
-                   help="test signal when --input is not given: the paper's sine plus white noise of variance R, "
-                        "or a random-acceleration track (default: sine)")
-    p.add_argument("--input", metavar="CSV", help="use the 'y' column of CSV (and 'truth' if present) instead of a scenario")
+    p.add_argument("--scenario", choices=SCENARIO_NAMES,
+                   help="test signal when --input is not given: the paper's sine plus white noise of variance R (each "
+                        "observation its own), a random-acceleration track, or the model's own process (default: sine)")
+    if files:
+        p.add_argument("--input", metavar="CSV", action="append",
+                       help="a recording to use instead of a scenario: its input columns and its 'truth' (repeat "
+                            "for several files)")
+    else:
+        p.add_argument("--input", metavar="CSV", help="use the input columns of CSV ('y', or the model's observation "
+                                                      "names; and 'truth' if present) instead of a scenario")
     p.add_argument("--clip", action="store_true", help="with --input: saturate values outside the 16-bit range "
                                                         "instead of failing")
     p.add_argument("--samples", type=positive_int, metavar="N",
@@ -220,11 +228,77 @@ def add_signal_args(p):
 
 
 def add_design_args(p, channels_help):
-    """--filter, --variant, --channels, --config, --prefilter: the arguments of the commands that build hardware."""
+    """--filter, --variant, --channels, --config, --architecture, --prefilter: the arguments of the
+    commands that build hardware."""
     add_filter_args(p)
     p.add_argument("--channels", type=int, choices=(1, 6), default=1, help=channels_help)
-    p.add_argument("--config", metavar="TOML", help="model parameters and formats")
+    p.add_argument("--config", metavar="TOML", help="model parameters, formats and [board] rate")
+    p.add_argument("--architecture", choices=("auto", "parallel", "sequential"), default="auto",
+                   help="the core: parallel (the update over pipeline stages), sequential (one operation at a time), "
+                        "or auto: the cheapest design whose estimated Fmax is at least 1.25 x the clock and whose "
+                        "throughput covers the sample rate (see 'kfpga explore'; default: auto)")
     add_prefilter_args(p)
+
+
+def need_hz(config, channels):
+    """Updates a second the core must make: the board's rate on every channel; 0 without one (the
+    ADC then converts as fast as the core takes its samples: a slower core paces it)."""
+    return (config.board.sample_rate_hz or 0.0) * channels
+
+
+def explore(config, variant, channels, *, quiet=False):
+    """Every candidate design (``kfpga.flows.explore``), with a progress bar."""
+    from tqdm import tqdm
+
+    from kfpga.flows.explore import candidates
+
+    # no bar when stderr is not a terminal (a log, a test): only the line of the choice
+    with tqdm(desc="explore", unit="design", file=sys.stderr, disable=True if quiet else None) as bar:
+        def progress(i, total, label):
+            bar.total = total
+            bar.n = i
+            bar.set_postfix_str(f"{label} (yosys; the first run on a machine compiles it, ~35 s)")
+            bar.refresh()
+
+        found = candidates(config, variant, channels=channels, clock_hz=config.board.clock_hz,
+                           need_hz=need_hz(config, channels), progress=progress)
+        bar.n = len(found)
+    return found
+
+
+def check_architecture(args, config):
+    """Refuse an ``--architecture`` that cannot run the variant (before anything is printed)."""
+    if args.architecture != "auto":
+        why = config.spec.why_not(args.variant, config.params, args.architecture)
+        if why:
+            raise UsageError(f"--architecture {args.architecture}: {why}")
+
+
+def architecture(args, config, channels):
+    """The core's architecture of ``--architecture``: checked when given, chosen by :func:`explore`
+    for ``auto`` (``UsageError`` when no design meets the clock and the rate)."""
+    from kfpga.flows.explore import FMAX_MARGIN, choose
+
+    chosen = args.architecture
+    args.candidates = None
+    if chosen != "auto":
+        check_architecture(args, config)
+        args.stages = None
+        return chosen
+    found = explore(config, args.variant, channels, quiet=getattr(args, "quiet", False))
+    args.candidates = found
+    best = choose(found)
+    if best is None:
+        fastest = max(found, key=lambda c: c.fmax_mhz)
+        raise UsageError(f"no design of the {args.variant} variant meets the {config.board.clock_hz / 1e6:g} MHz clock "
+                         f"and the rate: the fastest, {fastest.label}, is estimated at {fastest.fmax_mhz:g} MHz "
+                         f"({fastest.worst_path}); see 'kfpga explore'")
+    args.stages = best.stages
+    margin = "" if best.meets else (f"; no design has the {FMAX_MARGIN:g} x margin over the clock, this one the "
+                                    "most economical that meets it")
+    info(f"architecture: {best.label} ({best.logic_cells} logic cells, {best.fmax_mhz:g} MHz estimated{margin}; "
+         "'kfpga explore' lists the others)")
+    return best.architecture
 
 
 def add_json(p, what="print one JSON object"):
@@ -344,6 +418,9 @@ def samples_for(args, config, *, command, need_truth=False):
         args.seed = pick_seed(args.seed)
         notes.append(f"seed {args.seed} (replay with --seed {args.seed})")
         truth, y = scenarios.for_config(args.scenario, count, args.seed, config)
+        rails = scenarios.check_rails(args.scenario, y)
+        if rails:
+            notes.append(f"scenario {args.scenario}: {rails} sample(s) at the ADC's rails (clipped)")
         label = f"scenario {args.scenario}"
     for note in notes:
         info(note)
@@ -393,7 +470,7 @@ def add_adc_source_args(p):
     p.add_argument("--samples", type=positive_int, metavar="N",
                    help="estimates to check (default: 2000, or every row of --input; at most those)")
     p.add_argument("--seed", type=seed_type, metavar="S", help="noise seed of the ADC inputs (default: random, printed)")
-    p.add_argument("--scenario", choices=("sine", "random-accel"), help="ADC input signal (default: sine)")
+    p.add_argument("--scenario", choices=SCENARIO_NAMES, help="ADC input signal (default: sine)")
     p.add_argument("--input", metavar="CSV", help="replay a CSV on the ADC inputs: y0..y5, or y on all six")
 
 

@@ -20,8 +20,20 @@ def add_parser(sub):
     p.set_defaults(func=run)
 
 
+def _built_bits(config, name, fmt):
+    """The bits a point costs: a constant-only point's widest constant without its sign copies."""
+    from kfpga.core.fixed import to_raw
+    from kfpga.core.formats import constant_values, significant_bits
+
+    values = constant_values(config.spec, config.params).get(name)
+    if not config.spec.points[name].constant or not values:
+        return fmt.width
+    return max(significant_bits(to_raw(v, fmt)[0]) for v in values)
+
+
 def formats_table(config):
-    """Rows describing each quantisation point (``kfpga formats``)."""
+    """Rows describing each quantisation point (``kfpga formats``); ``bits`` is what the point
+    costs (a constant: its significant bits, which can be fewer than its format's)."""
     points = config.spec.points
     ranges = config.ranges()
     rows = []
@@ -30,7 +42,7 @@ def formats_table(config):
         rows.append({
             "point": name,
             "format": str(fmt),
-            "bits": fmt.width,
+            "bits": _built_bits(config, name, fmt),
             "covers": f"±{fmt.max_value:.6g}",
             "analysed_max": ranges.get(name),
             "lsb": fmt.lsb,
@@ -52,11 +64,18 @@ def run(args):
     common.warn_precision(config)
     if args.toml:
         print(config.to_toml(formats=args.pin_formats), end="")
-        return 0
-    rows = formats_table(config)
-    if args.json:
-        common.emit_json(rows)
-        return 0
+    elif args.json:
+        common.emit_json(formats_table(config))
+    else:
+        _print(formats_table(config))
+    # the table is only worth writing if the other commands take it: every variant that applies
+    for variant, v in config.spec.variants.items():
+        if v.applies(config.params) is None:
+            config.require_variant(variant)
+    return 0
+
+
+def _print(rows):
     print(f"{'point':<6} {'format':<7} {'bits':>4} {'covers':>12} {'analysed max':>13} {'rounding':<10} "
           f"{'overflow':<9} description")
     for r in rows:
@@ -64,4 +83,3 @@ def run(args):
         op = " [multiplier operand]" if r["multiplier_operand"] else ""
         print(f"{r['point']:<6} {r['format']:<7} {r['bits']:>4} {r['covers']:>12} {amax:>13} {r['rounding']:<10} "
               f"{r['overflow']:<9} {r['description']}{op}")
-    return 0

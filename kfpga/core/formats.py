@@ -12,10 +12,16 @@
   that the measurement noise alone causes, its floor on any signal) gets the fraction bits whose
   rounding adds at most a quarter of 1 % to that error (several roundings add up); an operand then
   grows past the multiplier width when it must (each product takes more multiplier pieces).
-* Precision: every constant and reset value of the variants that apply must be held within
-  :data:`PRECISION` (1 %). A register gets the fraction bits that takes; an operand, whose width
-  is fixed, gives up its guard bit for them when its range allows. A value that still does not
-  fit is refused when the config is checked, naming the point and the bits it needs.
+* Precision: every constant and reset value of the variants that apply is held within
+  :data:`PRECISION` (1 %) by its default format. A register gets the fraction bits that takes;
+  an operand first gives up its guard bit for them, then grows past the multiplier width (up to
+  :data:`MAX_OPERAND_BITS`; each product then takes more multiplier pieces). A format the user
+  pins is checked instead, and refused naming the point and the bits it needs.
+* A point that holds only constants (an entry of F, 1/T) is an operand as above, with at least
+  the fraction bits that leave its smallest constant :data:`CONSTANT_BITS` significant bits,
+  whatever its size (0.01 and 5e-5 alike). A constant costs its significant bits only (its
+  leading sign copies are not built), so a small constant with many fraction bits is still one
+  narrow multiplier operand.
 
 All defaults round ``nearest`` (ties toward +inf) and ``saturate``.
 """
@@ -27,7 +33,8 @@ import math
 from kfpga.core.fixed import QFormat, Rounding, bits_for, to_raw
 
 __all__ = ["MULTIPLIER_BITS", "MAX_OPERAND_BITS", "STATE_FRAC_BITS", "GUARD_BITS", "PRECISION", "register_formats",
-           "precision_frac_bits", "precision_needs", "noise_frac_bits", "noise_step_frac"]
+           "precision_frac_bits", "precision_needs", "noise_frac_bits", "noise_step_frac", "constant_frac_bits",
+           "significant_bits", "constant_values", "COVARIANCE_GUARD", "covariance_frac"]
 
 #: Cyclone II embedded multiplier operand width (Cyclone II Device Handbook, vol. 1, "Embedded
 #: Multipliers": 18x18 or two 9x9 per block).
@@ -40,14 +47,29 @@ STATE_FRAC_BITS = 8
 GUARD_BITS = 1
 #: The largest relative error a constant or reset value may get from its format.
 PRECISION = 0.01
+#: Fraction bits a predicted covariance that feeds the gain's division gets beyond what its
+#: settled values need, when those already take it past the multiplier's width: the recursion
+#: P -> Pl -> K -> P adds up its roundings (measured over T = 0.001 .. 8 on 2- and 3-state models;
+#: within the multiplier's width the operand's own fraction bits suffice).
+COVARIANCE_GUARD = 3
 
 
-def precision_frac_bits(value, rounding=Rounding.NEAREST):
-    """The fewest fraction bits that hold ``value`` (nonzero) within :data:`PRECISION`."""
+def covariance_frac(fmt):
+    """The fraction bits of a predicted covariance operand ``fmt`` with :data:`COVARIANCE_GUARD`."""
+    if fmt.width <= MULTIPLIER_BITS:
+        return fmt.frac_bits
+    return min(fmt.frac_bits + COVARIANCE_GUARD, MAX_OPERAND_BITS - fmt.int_bits)
+#: Significant bits every constant keeps at least by default (a relative error below 2**-10):
+#: a constant far below 1 gets the fraction bits for them, so 0.01 and 5e-5 are held alike.
+CONSTANT_BITS = 10
+
+
+def precision_frac_bits(value, rounding=Rounding.NEAREST, precision=PRECISION):
+    """The fewest fraction bits that hold ``value`` (nonzero) within ``precision``."""
     for frac in range(200):
         fmt = QFormat(max(bits_for(abs(value), frac), 1), frac, rounding)
         raw, _ = to_raw(value, fmt)
-        if raw != 0 and abs(raw * fmt.lsb - value) <= PRECISION * abs(value):
+        if raw != 0 and abs(raw * fmt.lsb - value) <= precision * abs(value):
             return frac
     raise ValueError(f"no format holds {value!r}")
 
@@ -58,6 +80,33 @@ def noise_frac_bits(variance):
     rounding of the innovation, not the noise, sets the error (R = 0.01: steps of 0.025 codes).
     Variances of 16 and more need none."""
     return math.ceil(math.log2(4.0 / math.sqrt(variance))) if variance < 16.0 else 0
+
+
+def constant_frac_bits(value, bits=MULTIPLIER_BITS):
+    """The most fraction bits that keep the nonzero ``value`` within a signed ``bits``-bit integer
+    (at least 0): its significant bits fill the multiplier's operand."""
+    return max(0, bits - 2 - math.floor(math.log2(abs(value))))
+
+
+def significant_bits(raw):
+    """Bits of the signed integer ``raw`` without its redundant sign copies (the width a constant
+    costs in the datapath)."""
+    raw = int(raw)
+    return (raw if raw >= 0 else ~raw).bit_length() + 1
+
+
+def constant_values(spec, params):
+    """``{point: [nonzero constant values]}`` of the variants that apply to ``params``."""
+    from kfpga.core.spec import Constant
+
+    out = {}
+    for variant in spec.variants.values():
+        if variant.applies(params):
+            continue
+        for c in variant.constants(params).values():
+            if isinstance(c, Constant) and isinstance(c.point, str) and c.value != 0:
+                out.setdefault(c.point, []).append(c.value)
+    return out
 
 
 def precision_needs(spec, params):
@@ -72,10 +121,15 @@ def precision_needs(spec, params):
         points = dict(variant.state_for(params))
         values = [(c.point, c.value) for c in variant.constants(params).values() if isinstance(c, Constant)]
         values += [(points[name], value) for name, value in variant.initial(params).items()]
-        values += [(point, value) for _, value, point in variant.settled(params)]
-        for point, value in values:
+        settled = [(point, value) for _, value, point in variant.settled(params)]
+        for point, value in values + settled:
             if isinstance(point, str) and value != 0:
                 needs[point] = max(needs.get(point, 0), precision_frac_bits(value))
+        # the covariance a time-varying gain settles to sets the gain every update: held four
+        # times finer than the constants (and see COVARIANCE_GUARD)
+        for point, value in settled:
+            if isinstance(point, str) and value != 0:
+                needs[point] = max(needs[point], precision_frac_bits(value, precision=PRECISION / 4))
     return needs
 
 
@@ -84,6 +138,27 @@ def noise_step_frac(sigma, budget=PRECISION):
     to an error of rms ``sigma`` it is uncorrelated with: step/sqrt(12) <= sqrt((1+b)^2 - 1) sigma."""
     limit = math.sqrt((1.0 + budget) ** 2 - 1.0) * sigma * math.sqrt(12.0)
     return max(0, math.ceil(-math.log2(limit))) if limit > 0 else 0
+
+
+def _operand_format(point, reach, guard, precise, noisy, constants, operand_bits):
+    """A multiplier operand's default format (the rules of the module docstring)."""
+    if point.constant and constants:
+        # the operand's fraction bits, more if its smallest constant would keep fewer than
+        # CONSTANT_BITS significant bits (a small constant stays narrow: its sign copies are not built)
+        top = max(abs(c) for c in constants)
+        i = next(i for i in range(1, 64) if QFormat(i, max(operand_bits - i, 0)).covers(top))
+        frac = max(operand_bits - i, min(constant_frac_bits(c, CONSTANT_BITS + 1) for c in constants), precise)
+        return QFormat(i, frac, Rounding.NEAREST)
+    need = next(i for i in range(1, 64) if QFormat(i, max(operand_bits - i, 0)).covers(reach))
+    g = guard
+    if need + g > operand_bits - 1 or operand_bits - need - g < precise:
+        g = 0  # no room: keep the fraction bits, let saturation (flagged) cover the rest
+    i = need + g
+    frac = max(operand_bits - i, 0)
+    grow = max(noisy, precise)
+    if grow > frac:
+        frac = min(grow, MAX_OPERAND_BITS - i)  # more multiplier pieces per product
+    return QFormat(i, frac, Rounding.NEAREST)
 
 
 def register_formats(spec, params, ranges, *, operand_bits=MULTIPLIER_BITS, state_frac=STATE_FRAC_BITS,
@@ -116,18 +191,12 @@ def register_formats(spec, params, ranges, *, operand_bits=MULTIPLIER_BITS, stat
         # the fraction bits of this point and of the points that share its format
         return max([needs.get(name, 0)] + [needs.get(n, 0) for n in names if points[n].same_as == name])
 
+    constants = constant_values(spec, params)
     for name in names:
         point = points[name]
         if point.operand and point.same_as is None:
-            need = next(i for i in range(1, 64) if QFormat(i, max(operand_bits - i, 0)).covers(reach(name)))
-            g = guard(name)
-            if need + g > operand_bits - 1 or operand_bits - need - g < precise(name):
-                g = 0  # no room: keep the fraction bits, let saturation (flagged) cover the rest
-            i = need + g
-            frac = max(operand_bits - i, 0)
-            if noisy.get(name, 0) > frac:
-                frac = min(noisy[name], MAX_OPERAND_BITS - i)
-            formats[name] = QFormat(i, frac, Rounding.NEAREST)
+            formats[name] = _operand_format(point, reach(name), guard(name), precise(name), noisy.get(name, 0),
+                                            constants.get(name, ()), operand_bits)
     for name in names:
         point = points[name]
         if point.operand or point.same_as is not None:

@@ -43,6 +43,7 @@ import numpy as np
 from kfpga.core.fixed import INT64_SAFE_BITS, Overflow, QFormat, Rounding, requantize, to_raw
 
 __all__ = ["Fx", "Ops", "IntOps", "FloatOps", "WidthOps", "FractionOps", "CostOps", "update_cost", "Intermediate", "divider_shift",
+           "const_width",
            "quantise_fraction", "quotient_bits", "divide", "root_shift", "square_root"]
 
 
@@ -76,6 +77,14 @@ def root_shift(frac, root_frac):
 def quotient_bits(fmt):
     """Magnitude bits of the divider's quotient written into ``fmt`` (its sign comes back after)."""
     return fmt.width - 1
+
+
+def const_width(raw, fmt):
+    """The width a constant is built with: its significant bits (no redundant sign copies), at
+    most its format's. Every backend that counts widths uses this, so the widths it predicts are
+    the RTL's; the integers do not depend on it."""
+    raw = int(raw)
+    return min(fmt.width, (raw if raw >= 0 else ~raw).bit_length() + 1)
 
 
 def _power_of_two(c):
@@ -532,7 +541,7 @@ class WidthOps(Ops):
         return _W(fmt.width, name, frozenset([name]))
 
     def _const(self, raw, fmt, value, name):
-        return _W(fmt.width, name, frozenset([name]))
+        return _W(const_width(raw, fmt), name, frozenset([name]))
 
     def _zero(self):
         return _W(1, "0", frozenset())

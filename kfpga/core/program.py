@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 from kfpga.core.ads8364 import CODE_FORMAT
 from kfpga.core.fixed import Overflow, Rounding
-from kfpga.core.ops import Fx, Ops, quotient_bits
+from kfpga.core.ops import Fx, Ops, const_width, quotient_bits
 
 __all__ = ["Instruction", "Program", "ProgramOps", "build_program", "OPS", "ROUNDINGS"]
 
@@ -94,7 +94,7 @@ class ProgramOps(Ops):
         return self._new("input", width=fmt.width, key=raw)
 
     def _const(self, raw, fmt, value, name):
-        return self._new("const", width=max(fmt.width, raw.bit_length() + 1), key=raw)
+        return self._new("const", width=const_width(raw, fmt), key=raw)
 
     def _zero(self):
         return self._new("const", width=1, key=0)

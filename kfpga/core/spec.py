@@ -15,7 +15,14 @@ from types import MappingProxyType
 from typing import NamedTuple
 
 __all__ = ["Point", "Output", "Variant", "FilterSpec", "Constant", "Evaluation", "Mode", "Prefilter", "MutationBlock",
-           "resolve"]
+           "resolve", "ARCHITECTURES", "SEQUENTIAL_CORE"]
+
+#: The architectures a core can have: ``parallel`` (a filter's own core: its update spread over
+#: pipeline stages, channels interleaved) and ``sequential`` (``hw/sequencer.py``: one operation at
+#: a time on one adder, one multiplier, one divider and one square root, the state in block memory).
+ARCHITECTURES = ("parallel", "sequential")
+#: The sequential core runs any update the operations layer writes: every filter and variant has it.
+SEQUENTIAL_CORE = "kfpga.hw.sequencer:make_core"
 
 
 def resolve(target):
@@ -112,8 +119,8 @@ class Variant:
     applies:
         ``applies(params) -> None | why not``: whether these parameters can use the variant.
     hardware:
-        ``hardware(params) -> None | why not``: whether the variant has a core for these
-        parameters (a variant may be model-only for some of them).
+        ``hardware(params) -> None | why not``: whether the filter's parallel core runs the
+        variant with these parameters (the sequential core runs every variant).
     settled:
         ``settled(params) -> [(label, value, point), ...]``: values the update settles to (the
         steady-state covariance of a time-varying gain), which, like the constants, their
@@ -127,7 +134,7 @@ class Variant:
     initial: Callable
     update: Callable
     applies: Callable = field(default=lambda params: None)  # params -> None or why not
-    hardware: Callable = field(default=lambda params: None)  # params -> None or why there is no core
+    hardware: Callable = field(default=lambda params: None)  # params -> None or why the parallel core cannot
     settled: Callable = field(default=lambda params: [])  # params -> [(label, value, point)]
 
     def state_for(self, params):
@@ -275,8 +282,9 @@ class FilterSpec:
     reference:
         ``reference(params, variant, y) -> {output: float array}``: the float filter.
     core:
-        ``"module:function"`` building the Amaranth core, ``f(config, variant, *, channels)``;
-        imported only when hardware is asked for (the model never imports ``hw/``).
+        The parallel core: ``"module:function"`` building it, ``f(config, variant, *, channels)``,
+        imported only when hardware is asked for (the model never imports ``hw/``); ``None`` for
+        a filter that has only the sequential core (``SEQUENTIAL_CORE``), which every filter has.
     goals:
         ``goals(config, variant, channels) -> {"logic_cells": n, "mul18": n, "lut_levels": n}``: the
         resource goals of the core with ``channels`` channel states.
@@ -332,7 +340,7 @@ class FilterSpec:
     ranges: Callable
     validate: Callable
     reference: Callable
-    core: str
+    core: object
     goals: Callable
     default_output: str
     random_params: Callable
@@ -394,10 +402,31 @@ class FilterSpec:
         return next(iter(self.variants))
 
 
-    def make_core(self, config, variant, *, channels=1, **options):
-        """The Amaranth core of ``variant`` (imports the RTL module on first use); ``options``
-        go to the filter's core (``stages=L`` for a steady-state loop)."""
-        return resolve(self.core)(config, variant, channels=channels, **options)
+    def architectures(self, variant, params):
+        """The architectures that run ``variant`` with ``params``, the parallel one first when it can."""
+        parallel = self.core is not None and self.variants[variant].hardware(params) is None
+        return ("parallel", "sequential") if parallel else ("sequential",)
+
+    def why_not(self, variant, params, architecture):
+        """``None`` if ``architecture`` runs ``variant`` with ``params``, else why not."""
+        if architecture not in ARCHITECTURES:
+            return f"architecture must be one of {', '.join(ARCHITECTURES)}, not {architecture!r}"
+        if architecture in self.architectures(variant, params):
+            return None
+        if self.core is None:
+            return f"the {self.name} filter has no parallel core: it runs on the sequential core"
+        return self.variants[variant].hardware(params)
+
+    def make_core(self, config, variant, *, channels=1, architecture=None, **options):
+        """The Amaranth core of ``variant`` on ``architecture`` (default: the parallel core where it
+        runs, else the sequential one; the RTL module is imported on first use); ``options`` go to
+        the core (``stages=L`` for a pipelined loop)."""
+        architecture = architecture or self.architectures(variant, config.params)[0]
+        why = self.why_not(variant, config.params, architecture)
+        if why:
+            raise ValueError(why)
+        target = self.core if architecture == "parallel" else SEQUENTIAL_CORE
+        return resolve(target)(config, variant, channels=channels, **options)
 
     def load_evaluation(self):
         """Its :class:`Evaluation`, or ``None``."""

@@ -122,7 +122,7 @@ def compare(config, variant, y, truth=None, *, settle=None, seed=None, scenario=
     return Comparison(metrics, raw, truth, flx1, fx1, lsb, settle, main)
 
 
-def limit_cycles(config, variant, *, samples=LIMIT_CYCLE_SAMPLES, window=LIMIT_CYCLE_WINDOW):
+def limit_cycles(config, variant, *, samples=LIMIT_CYCLE_SAMPLES, window=LIMIT_CYCLE_WINDOW, floats=None):
     """Dead band and limit cycles of the fixed filter on noise-free inputs (:data:`LIMIT_CYCLE_INPUTS`).
 
     The input that observes the main output (or the first) gets the level, any other input 0.
@@ -130,7 +130,9 @@ def limit_cycles(config, variant, *, samples=LIMIT_CYCLE_SAMPLES, window=LIMIT_C
     minus the float one is measured in input LSBs (ADC codes): the **dead band** is the largest
     offset it keeps (its median, in magnitude), the **limit cycle** its peak-to-peak swing. A
     filter without either gives 0 and 0. ``fields`` gives each output's largest |fixed - float| in
-    the window, in its own units (a rate stuck off zero shows there).
+    the window, in its own units (a rate stuck off zero shows there). ``floats``: a dict this
+    function fills with the float runs the first time and reads after (they do not depend on the
+    formats: a search passes one dict for all its candidates).
     """
     model = FixedModel(config, variant=variant)
     main = config.spec.default_output
@@ -144,7 +146,12 @@ def limit_cycles(config, variant, *, samples=LIMIT_CYCLE_SAMPLES, window=LIMIT_C
     per_input, dead, cycle = {}, 0.0, 0.0
     for i, (label, *_rest) in enumerate(LIMIT_CYCLE_INPUTS):
         y = levels[i] if len(names) == 1 else {n: c[i] for n, c in codes.items()}
-        flt = float_run(config, variant, y)
+        if floats is not None and (variant, label) in floats:
+            flt = floats[(variant, label)]
+        else:
+            flt = float_run(config, variant, y)
+            if floats is not None:
+                floats[(variant, label)] = flt
         diff = fixed[main][i][w] - flt[main][w]
         entry = {"dead_band_lsb": float(abs(np.median(diff))), "limit_cycle_lsb": float(np.ptp(diff)),
                  "fields": {name: float(np.max(np.abs(fixed[name][i][w] - flt[name][w]))) for name in model.outputs}}

@@ -215,9 +215,11 @@ def io_timing(ratio=10):
 
 
 def write_project(out_dir, config, *, variant=None, six_channel=False, channel=None, ratio=10, pins=None,
-                  out_field=None, prefilter=None):
+                  out_field=None, prefilter=None, architecture=None, stages=None, timing=None):
     """Write the Verilog and a complete Quartus II project into ``out_dir``; returns the manifest.
-    ``prefilter``: the config of a 53H smoother between the controller and the core, or ``None``."""
+    ``prefilter``: the config of a filter between the controller and the core, or ``None``;
+    ``architecture``, ``stages``: the core's (default: the parallel one where it runs); ``timing``:
+    what the design's estimate says of the clock, recorded in the manifest."""
     out_dir = Path(out_dir)
     variant = config.spec.default_variant if variant is None else variant
     out_field = top_out_field(config, out_field)
@@ -225,7 +227,7 @@ def write_project(out_dir, config, *, variant=None, six_channel=False, channel=N
     assigned = check_pins(rows, config, label, out_field)
     values = _sdc_values(ratio)
     verilog, top = write_top(out_dir, config, variant=variant, six_channel=six_channel, channel=channel, ratio=ratio,
-                             out_field=out_field, prefilter=prefilter)
+                             out_field=out_field, prefilter=prefilter, architecture=architecture, stages=stages)
     data_bits = out_width(config, out_field)
 
     control = [n for n in PORTS if n.startswith("adc_") and PORTS[n][0] == "out" and n != "adc_clk"]
@@ -264,10 +266,15 @@ def write_project(out_dir, config, *, variant=None, six_channel=False, channel=N
         "model": _jsonable(dataclasses.asdict(config.params)),
         "formats": {name: {"format": str(f), "width": f.width, "rounding": f.rounding.value,
                            "overflow": f.overflow.value} for name, f in config.formats.items()},
-        "core": {"latency_cycles": core.latency, "cycles_per_update": core.cycles_per_update},
+        "core": {"architecture": top.architecture, "stages": getattr(core, "stages", None),
+                 "latency_cycles": core.latency, "cycles_per_update": core.cycles_per_update},
+        "sample_rate_hz": config.board.actual_rate_hz(),
+        "conversion_period_cycles": config.board.period_cycles(),
+        "timing": timing,
         "prefilter": None if prefilter is None else {
             "filter": prefilter.filter, "model": _jsonable(dataclasses.asdict(prefilter.params)),
-            "latency_cycles": top.prefilter.latency, "delay_samples": 4, "channels": top.prefilter.channels},
+            "latency_cycles": top.prefilter.latency, "delay_samples": prefilter.spec.prefilter.delay,
+            "channels": top.prefilter.channels},
         "controller": {"states": 22, "timeout_clk_periods": top.frontend.controller.timeout_periods},
         "ports": [{"name": n, "direction": d, "width": data_bits if n == "out_data" else w,
                    "pins": [assigned[(n, b)].pin for p, b in port_bits(config, out_field) if p == n], "description": desc}

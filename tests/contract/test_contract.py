@@ -42,10 +42,11 @@ CYCLE_BUDGET, MIN_SAMPLES = 150_000, 100
 
 CASES = [pytest.param(spec.name, variant, id=f"{spec.name}-{variant}")
          for spec in registry.specs() for variant in spec.variants]
-#: The variants with a core for their default parameters (a model-only variant has none).
-HW_CASES = [pytest.param(spec.name, variant, id=f"{spec.name}-{variant}")
+#: Every variant on every architecture that runs it with its default parameters (the sequential
+#: core runs every variant).
+HW_CASES = [pytest.param(spec.name, variant, architecture, id=f"{spec.name}-{variant}-{architecture}")
             for spec in registry.specs() for variant in spec.variants
-            if spec.variants[variant].hardware(spec.params()) is None]
+            for architecture in spec.architectures(variant, spec.params())]
 
 
 def random_config(spec, variant, rng):
@@ -80,11 +81,12 @@ def random_config(spec, variant, rng):
     raise AssertionError(f"no valid random config for {spec.name} in 200 tries")
 
 
-def samples_for(config, variant, n, channels=1):
+def samples_for(config, variant, n, channels=1, architecture=None):
     """``n``, or fewer for a core whose updates take many cycles (see the module docstring)."""
     from kfpga.hw.generate import figures_only
 
-    cycles = figures_only(config.spec.make_core(config, variant, channels=channels)).cycles_per_update
+    cycles = figures_only(config.spec.make_core(config, variant, channels=channels,
+                                                architecture=architecture)).cycles_per_update
     return max(MIN_SAMPLES, min(n, CYCLE_BUDGET // cycles))
 
 
@@ -129,21 +131,22 @@ def test_model_equals_the_exact_rational_spec(name, variant, seed):
         np.testing.assert_array_equal(batch.overflow[0], flags)
 
 
-@pytest.mark.parametrize(("name", "variant"), HW_CASES)
+@pytest.mark.parametrize(("name", "variant", "architecture"), HW_CASES)
 @pytest.mark.parametrize("channels", [1, 3])
-def test_rtl_equals_model_with_backpressure(name, variant, channels, seed):
+def test_rtl_equals_model_with_backpressure(name, variant, architecture, channels, seed):
     """Random valid/ready on both sides, several channel states; every field, one output per input."""
     config = FilterConfig(filter=name)
     rng = np.random.default_rng(seed)
-    n = samples_for(config, variant, 1500, channels)
-    report = run_core(config, variant, codes(rng, n), seed=seed, channels=channels, p_idle=0.3, p_ready=0.5)
+    n = samples_for(config, variant, 1500, channels, architecture)
+    report = run_core(config, variant, codes(rng, n), seed=seed, channels=channels, p_idle=0.3, p_ready=0.5,
+                      options={"architecture": architecture})
     assert report["compared"] == n and report["extra"] == 0
 
 
-@pytest.mark.parametrize(("name", "variant"), HW_CASES)
-def test_declared_latency_and_cycles_per_update_are_measured(name, variant):
+@pytest.mark.parametrize(("name", "variant", "architecture"), HW_CASES)
+def test_declared_latency_and_cycles_per_update_are_measured(name, variant, architecture):
     config = FilterConfig(filter=name)
-    dut = config.spec.make_core(config, variant)
+    dut = config.spec.make_core(config, variant, architecture=architecture)
     latency, accepted, produced = measure_timing(dut, config)
     assert latency == dut.latency
     # once an input register has filled, inputs are taken and estimates given once per update
@@ -151,10 +154,10 @@ def test_declared_latency_and_cycles_per_update_are_measured(name, variant):
     assert produced[:5] == [dut.cycles_per_update] * 5
 
 
-@pytest.mark.parametrize(("name", "variant"), HW_CASES)
-def test_generated_verilog_parses_and_lints(name, variant, tmp_path):
+@pytest.mark.parametrize(("name", "variant", "architecture"), HW_CASES)
+def test_generated_verilog_parses_and_lints(name, variant, architecture, tmp_path):
     config = FilterConfig(filter=name)
-    path, _ = write_block(tmp_path, "core", config, variant=variant, channels=3)
+    path, _ = write_block(tmp_path, "core", config, variant=variant, channels=3, architecture=architecture)
     rc, out = verilator_lint(path, path.stem, path.parent / "verilator_lint.vlt")
     assert rc == 0, out
     if iverilog_path():
@@ -166,47 +169,49 @@ def test_generated_verilog_parses_and_lints(name, variant, tmp_path):
 
 @pytest.mark.cosim
 @pytest.mark.parametrize("simulator", SIMULATORS)
-@pytest.mark.parametrize(("name", "variant"), HW_CASES)
-def test_cosimulation_is_bit_exact(name, variant, simulator, seed):
+@pytest.mark.parametrize(("name", "variant", "architecture"), HW_CASES)
+def test_cosimulation_is_bit_exact(name, variant, architecture, simulator, seed):
     need(simulator)
     config = FilterConfig(filter=name)
-    n = samples_for(config, variant, 1500, 3)
-    result = run(build(simulator, "core", config=config, variant=variant, channels=3), "test_core",
-                 testcase="core_bit_exact",
+    n = samples_for(config, variant, 1500, 3, architecture)
+    result = run(build(simulator, "core", config=config, variant=variant, channels=3, architecture=architecture),
+                 "test_core", testcase="core_bit_exact",
                  params={"variant": variant, "seed": seed, "samples": n, "channels": 3, "p_idle": 0.2,
-                         "p_ready": 0.7, "config_toml": config.to_toml()}, tag=f"contract-{name}-{variant}")
+                         "p_ready": 0.7, "config_toml": config.to_toml(), "architecture": architecture},
+                 tag=f"contract-{name}-{variant}-{architecture}")
     assert result["mismatches"] == 0 and result["ok"], result.get("first_mismatches")
     assert result["samples"] == n
 
 
 @pytest.mark.cosim
 @pytest.mark.parametrize("simulator", SIMULATORS)
-@pytest.mark.parametrize(("name", "variant"), HW_CASES)
-def test_state_holds_while_the_core_waits(name, variant, simulator, seed):
+@pytest.mark.parametrize(("name", "variant", "architecture"), HW_CASES)
+def test_state_holds_while_the_core_waits(name, variant, architecture, simulator, seed):
     """The first sample 0, 1, 2 or 3 idle cycles after a reset, then samples at full rate: every
     estimate the model's (a state register that drifts while the core idles fails one of them)."""
     need(simulator)
     config = FilterConfig(filter=name)
-    result = run(build(simulator, "core", config=config, variant=variant, channels=3), "test_core",
-                 testcase="core_idle_after_reset",
+    result = run(build(simulator, "core", config=config, variant=variant, channels=3, architecture=architecture),
+                 "test_core", testcase="core_idle_after_reset",
                  params={"variant": variant, "seed": seed, "samples": 160, "channels": 3,
-                         "config_toml": config.to_toml()}, tag=f"contract-idle-{name}-{variant}")
+                         "config_toml": config.to_toml(), "architecture": architecture},
+                 tag=f"contract-idle-{name}-{variant}-{architecture}")
     assert result["ok"] and result["compared"] == 160
 
 
 @pytest.mark.cosim
 @pytest.mark.parametrize("simulator", SIMULATORS)
-@pytest.mark.parametrize(("name", "variant"), HW_CASES)
-def test_whole_design_is_bit_exact(name, variant, simulator, seed):
+@pytest.mark.parametrize(("name", "variant", "architecture"), HW_CASES)
+def test_whole_design_is_bit_exact(name, variant, architecture, simulator, seed):
     """The core on the board: clock divider, ADS8364 controller and core, with the Verilog ADC
     model checking every timing figure; a core slower than the ADC paces its reads."""
     from kfpga.sim import system
 
     need(simulator)
     config = FilterConfig(filter=name)
-    n = samples_for(config, variant, 400)
-    result = system.run(system.build(simulator, config=config, variant=variant), params={"seed": seed}, samples=n,
-                        tag=f"contract-{name}-{variant}")
+    n = samples_for(config, variant, 400, 1, architecture)
+    result = system.run(system.build(simulator, config=config, variant=variant, architecture=architecture),
+                        params={"seed": seed}, samples=n, tag=f"contract-{name}-{variant}-{architecture}")
     assert result["mismatches"] == 0 and result["ok"], result.get("first_mismatches")
     assert result["samples"] == n and result["outputs"] == n and result["adc_errors"] == 0
 
@@ -240,8 +245,8 @@ def flag_alone_configs(config, variant, y, most=3):
     return sorted(found, key=lambda f: -int(f[2].sum()))[:most]
 
 
-@pytest.mark.parametrize(("name", "variant"), HW_CASES)
-def test_each_overflow_flag_reaches_the_estimate_on_its_own(name, variant, seed):
+@pytest.mark.parametrize(("name", "variant", "architecture"), HW_CASES)
+def test_each_overflow_flag_reaches_the_estimate_on_its_own(name, variant, architecture, seed):
     """A point made narrow, so that it saturates on samples where no other point does: there the
     estimate's flag is that point's alone, and a core that dropped it would differ from the model
     (up to three points of each core; a filter none of whose writes can overflow at its default
@@ -249,7 +254,7 @@ def test_each_overflow_flag_reaches_the_estimate_on_its_own(name, variant, seed)
     from kfpga.sim.sources import stress_codes
 
     config = FilterConfig(filter=name)
-    n = samples_for(config, variant, 1200)
+    n = samples_for(config, variant, 1200, 1, architecture)
     # fixed codes: the samples that saturate are found in them, seed or not
     y = stress_codes(1, n) if len(config.inputs) == 1 else {k: stress_codes(1 + 7 * j, n)
                                                              for j, k in enumerate(config.inputs)}
@@ -258,5 +263,6 @@ def test_each_overflow_flag_reaches_the_estimate_on_its_own(name, variant, seed)
         assert not FixedModel(config, variant=variant).kernel(False).sites, "a write that can overflow, never alone"
         return
     for point, narrow, alone in cases:
-        report = run_core(narrow, variant, y, seed=seed, p_idle=0.2, p_ready=0.6)  # every flag against the model
+        report = run_core(narrow, variant, y, seed=seed, p_idle=0.2, p_ready=0.6,
+                          options={"architecture": architecture})  # every flag against the model
         assert report["got"]["overflow"][alone].all(), point

@@ -1,0 +1,160 @@
+"""``kfpga explore``: every design the tool can build for a config, and the one it chooses.
+
+A filter's update runs on its parallel core (the update spread over L register stages, channels
+interleaved; L from 1 to what the core allows) or on the sequential core (one operation at a
+time; every filter has it). Each candidate is synthesised with Yosys (``hw/resources.py``) for
+its logic cells, multipliers, block-memory bits and estimated Fmax on the -8 part, and its
+throughput comes from its cycles per update. The board needs ``sample_rate_hz`` updates a second
+on every channel at ``clock_hz`` (without a stated rate nothing: the ADC then converts as fast
+as the core takes its samples).
+
+The choice (``--architecture auto``): the cheapest candidate (logic cells, then multipliers,
+then M4K bits) whose estimated Fmax is at least :data:`FMAX_MARGIN` times the clock and whose
+throughput covers the need; when none has that margin, the cheapest that meets the clock itself
+(and the caller warns); when none meets the clock, none. The architecture changes no integer:
+every candidate computes the model's.
+
+Estimates are cached by the Verilog's content under the user's cache folder, so a second run of
+the same design costs no synthesis.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+__all__ = ["Candidate", "candidates", "choose", "FMAX_MARGIN", "MAX_STAGES"]
+
+#: The estimate must beat the clock by this factor: it is an estimate (FloPoCo's delays, no
+#: place and route), and Quartus's router adds what the estimate cannot see.
+FMAX_MARGIN = 1.25
+#: Pipeline stages tried at most.
+MAX_STAGES = 8
+
+
+@dataclass
+class Candidate:
+    """One design: its architecture and figures."""
+
+    architecture: str
+    stages: int | None
+    channels: int
+    logic_cells: int
+    mul18: int
+    memory_bits: int
+    fmax_mhz: float
+    cycles_per_update: int
+    updates_per_s: float  # at the clock, over all channels together
+    meets_clock: bool  # with the margin
+    meets_rate: bool
+    worst_path: str = ""
+    chosen: bool = False
+    clock_mhz: float = 50.0
+
+    @property
+    def within_clock(self):
+        """Estimated at least at the clock itself (no margin)."""
+        return self.fmax_mhz >= self.clock_mhz
+
+    @property
+    def meets(self):
+        return self.meets_clock and self.meets_rate
+
+    @property
+    def label(self):
+        return self.architecture + ("" if self.stages is None else f", {self.stages} stages")
+
+    def as_dict(self):
+        return {**asdict(self), "meets": self.meets, "within_clock": self.within_clock, "label": self.label}
+
+
+def _cache_dir():
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "kfpga" / "estimates"
+
+
+def _estimate(core, name):
+    """Yosys's figures of ``core`` (cached by the Verilog's content)."""
+    from kfpga.hw.generate import to_verilog
+    from kfpga.hw.resources import estimate
+
+    text = to_verilog(core, name)
+    digest = hashlib.sha256(text.encode()).hexdigest()[:24]
+    cache = _cache_dir() / f"{digest}.json"
+    try:
+        return json.loads(cache.read_text())
+    except (OSError, ValueError):
+        pass
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / f"{name}.v"
+        path.write_text(text)
+        result = estimate(path, name)
+    keep = {k: result[k] for k in ("logic_cells", "mul18", "memory_bits", "fmax_mhz_estimate", "worst_path_ns")}
+    path = result.get("worst_path") or {}
+    keep["worst_path"] = f"{path.get('start', '?')} -> {path.get('end', '?')}" if path else ""
+    try:
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        cache.write_text(json.dumps(keep))
+    except OSError:
+        pass  # no cache folder: estimate again next time
+    return keep
+
+
+def _designs(config, variant, channels):
+    """``[(architecture, stages, core)]``: every design of ``variant`` with ``channels`` states."""
+    from kfpga.hw.generate import figures_only
+
+    spec = config.spec
+    out = []
+    for architecture in spec.architectures(variant, config.params):
+        if architecture == "sequential":
+            out.append((architecture, None, figures_only(spec.make_core(config, variant, channels=channels,
+                                                                        architecture=architecture))))
+            continue
+        default = figures_only(spec.make_core(config, variant, channels=channels, architecture=architecture))
+        if not hasattr(default, "stages"):
+            out.append((architecture, None, default))  # its figures read; built again when estimated
+            continue
+        for stages in range(1, MAX_STAGES + 1):
+            try:
+                core = spec.make_core(config, variant, channels=channels, architecture=architecture, stages=stages)
+            except ValueError:
+                continue
+            out.append((architecture, stages, figures_only(core)))
+    return out
+
+
+def candidates(config, variant, *, channels=1, clock_hz=50e6, need_hz, progress=None):
+    """Every design with its figures; ``need_hz`` updates a second over all channels together."""
+    out = []
+    designs = _designs(config, variant, channels)
+    for i, (architecture, stages, core) in enumerate(designs):
+        if progress:
+            progress(i, len(designs), architecture + ("" if stages is None else f", {stages} stages"))
+        est = _estimate(core, "kfpga_core")
+        interleaved = min(channels, stages) if stages else 1  # a loop takes a channel per stage in turn
+        updates = clock_hz * interleaved / core.cycles_per_update
+        out.append(Candidate(architecture, stages, channels, est["logic_cells"], est["mul18"], est["memory_bits"],
+                             est["fmax_mhz_estimate"], core.cycles_per_update, updates,
+                             est["fmax_mhz_estimate"] >= FMAX_MARGIN * clock_hz / 1e6, updates >= need_hz,
+                             est["worst_path"], clock_mhz=clock_hz / 1e6))
+    return out
+
+
+def choose(found):
+    """The cheapest candidate that meets the clock with the margin and the rate; else the cheapest
+    that meets the clock itself and the rate; marked ``chosen``. ``None`` when no candidate meets
+    the clock and the rate."""
+    def cost(c):
+        return c.logic_cells, c.mul18, c.memory_bits
+
+    ok = [c for c in found if c.meets] or [c for c in found if c.within_clock and c.meets_rate]
+    if not ok:
+        return None
+    best = min(ok, key=cost)
+    best.chosen = True
+    return best
