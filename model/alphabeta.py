@@ -311,4 +311,5 @@ SPEC = FilterSpec(
     evaluation="kfpga.model.evaluations.alphabeta:EVALUATION",
     modes=(TRACKS,),
     mutation=_mutation,
+    period=lambda params: (params.T, True),
 )

@@ -38,7 +38,15 @@ import numpy as np
 from kfpga.core.board import WORST_PATH_GOAL_NS
 from kfpga.core.errors import ConfigError
 from kfpga.core.fixed import QFormat
-from kfpga.core.formats import MAX_OPERAND_BITS, covariance_frac, noise_frac_bits, register_formats
+from kfpga.core.formats import (
+    MAX_OPERAND_BITS,
+    PRECISION,
+    constant_frac_bits,
+    covariance_frac,
+    noise_frac_bits,
+    precision_frac_bits,
+    register_formats,
+)
 from kfpga.core.params import matrix, number
 from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
@@ -667,6 +675,8 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
         want = min(max(e.frac_bits, need), max(e.frac_bits, state_frac))
         if want > e.frac_bits:
             formats[f"e{j + 1}"] = QFormat(e.int_bits, want, e.rounding, e.overflow)
+    _f_formats(params, ranges, formats)
+    _loop_formats(params, formats, err)
     # the predicted covariance that feeds the division: its guard bits, and P as fine
     for i in range(params.n):
         for j in range(i, params.n):
@@ -697,6 +707,68 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
         if len(picks) == 1 and row[picks[0]] == 1:
             formats[f"yh{j + 1}"] = formats[f"xl{picks[0] + 1}"]
     return formats
+
+
+def _injected(a, v, steps=60):
+    """``sum_k A^k v v^T A^kT``: the steady covariance of a unit injection ``v`` each update into the
+    error loop ``A`` (doubling: 2**steps updates)."""
+    s, m = np.outer(v, v), a.copy()
+    for _ in range(steps):
+        s_next = s + m @ s @ m.T
+        if np.allclose(s_next, s, rtol=1e-12, atol=0):
+            break
+        s, m = s_next, m @ m
+    return s
+
+
+def _loop_formats(params, formats, err):
+    """Fraction bits of the states for the rounding the loop feeds back: a state's rounding, each
+    update, is carried by the steady error loop ``A = (I - K H) F`` (slowly forgotten when the gains
+    are small), so it adds the steady covariance of that injection to every state. Each state gets
+    the fraction bits that keep its share of every state's added error within a quarter of the
+    budget of the float filter's error floor there (:func:`~kfpga.core.formats.noise_step_frac`'s
+    rule, for the loop's amplification)."""
+    if not err:
+        return
+    try:
+        gain = steady_gain(params)
+    except (ValueError, PBHError):
+        return
+    f, h = np.array(params.F), np.array(params.H)
+    n = params.n
+    a = (np.eye(n) - gain @ h) @ f
+    if np.max(np.abs(np.linalg.eigvals(a))) >= 1.0:
+        return
+    share = math.sqrt((1.0 + PRECISION / 4) ** 2 - 1.0) / math.sqrt(n)
+    floors = np.array([err[f"x{j + 1}"] for j in range(n)])
+    for i in range(n):
+        v = np.zeros(n)
+        v[i] = 1.0
+        # x_i written after the correction, and xl_i (its format) before it
+        gain_sq = np.diag(_injected(a, v)) + np.diag(_injected(a, (np.eye(n) - gain @ h) @ v))
+        lsb = min(share * floors[j] * math.sqrt(12.0 / gain_sq[j]) for j in range(n) if gain_sq[j] > 0 and floors[j] > 0)
+        need = math.ceil(-math.log2(lsb))
+        fmt = formats[f"x{i + 1}"]
+        if need > fmt.frac_bits:
+            formats[f"x{i + 1}"] = QFormat(fmt.int_bits, need, fmt.rounding, fmt.overflow)
+            formats[f"xl{i + 1}"] = formats[f"x{i + 1}"]
+
+
+def _f_formats(params, ranges, formats):
+    """An entry F_ij that takes a multiplier: fraction bits so that its rounding, times the largest
+    x_j, stays within a quarter of an LSB of xl_i (the error it would add to every prediction),
+    and at most the multiplier's width of significant bits (a small entry then has few: its
+    products are small); never fewer than the 1 % its value needs."""
+    for i, row in enumerate(params.F):
+        for j, value in enumerate(row):
+            name = f"f{i + 1}{j + 1}"
+            if name not in formats:
+                continue
+            reach = max(ranges.get(f"x{j + 1}", 0.0), 1.0)
+            need = math.ceil(math.log2(4.0 * reach / formats[f"xl{i + 1}"].lsb))
+            fmt = formats[name]
+            frac = max(precision_frac_bits(value), min(need, constant_frac_bits(value)))
+            formats[name] = QFormat(fmt.int_bits, frac, fmt.rounding, fmt.overflow)
 
 
 def _validate(config):
@@ -887,8 +959,10 @@ SPEC = FilterSpec(
     default_output="x1",
     random_params=_random_params,
     scenario=_scenario,
+    scenarios=("model", "sine", "random-accel"),
     presets=PRESETS,
     measured=_measured,
     adc=lambda params: params.adc,
     error_std=_error_std,
+    period=lambda params: (params.T, False),
 )

@@ -303,4 +303,5 @@ SPEC = FilterSpec(
     presets={"cv2": ("the paper's constant-velocity filter (seeds/001): T = 1, Q = 2, R = 4, P0 = 10 I", KalmanParams)},
     error_std=_error_std,
     mutation=_mutation,
+    period=lambda params: (params.T, True),
 )

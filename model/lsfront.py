@@ -608,4 +608,6 @@ SPEC = FilterSpec(
     scenario=_scenario,
     evaluation="kfpga.model.evaluations.lsfront:EVALUATION",
     mutation=_mutation,
+    period=lambda params: (params.T, True),
+    scenarios=("sine", "random-accel"),
 )

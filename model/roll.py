@@ -538,12 +538,12 @@ def _goals(config, variant, channels=1):
 
 
 def _scenario(name, n, seed, params):
-    """The synthetic roll series in codes (both scenarios); the truth of the prediction at
-    sample k is the clean roll at sample k + 2."""
+    """The synthetic roll series in codes (its one scenario, ``roll``); the truth of the prediction
+    at sample k is the clean roll at sample k + 2."""
     from kfpga.model.scenarios import adc_codes
 
-    if name not in ("sine", "random-accel"):
-        raise ValueError(f"scenario must be one of sine, random-accel, not {name!r}")
+    if name != "roll":
+        raise ValueError(f"scenario must be roll, not {name!r}")
     _, noisy, clean = synthetic_roll(n + 2, seed, T=params.T)
     return clean[2:] / params.lsb, adc_codes(noisy[:n] / params.lsb)
 
@@ -571,6 +571,8 @@ SPEC = FilterSpec(
     random_params=_random_params,
     scenario=_scenario,
     evaluation="kfpga.model.evaluations.roll:EVALUATION",
+    period=lambda params: (params.T, True),
+    scenarios=("roll",),
 )
 
 

@@ -464,4 +464,5 @@ SPEC = FilterSpec(
     modes=(OFFLINE,),
     prefilter=PREFILTER,
     mutation=_mutation,
+    scenarios=("sine", "random-accel"),
 )

@@ -274,26 +274,29 @@ def test_one_output_row_per_input_row_or_an_error(capsys, tmp_path):
 
 
 def test_readme_worked_example_runs_as_written(capsys, tmp_path, monkeypatch):
-    """The README's 3-state example: its commands, in its order, in a fresh folder."""
+    """The README's worked example (a 3-state tracker at T = 0.01 s): its config file and its
+    commands, in its order, in a fresh folder; the compare figure it prints is the run's."""
     import shlex
     from pathlib import Path
 
     readme = (Path(__file__).parents[1] / "README.md").read_text()
-    block = readme.split("### Worked example: a 3-state model", 1)[1].split("```sh\n", 1)[1].split("```", 1)[0]
+    section = readme.split("### Worked example: your own tracker at T = 0.01 s", 1)[1]
+    toml = section.split("```toml\n", 1)[1].split("```", 1)[0]
+    block = section.split("```sh\n", 1)[1].split("```", 1)[0]
     lines = [line.split("#", 1)[0].strip() for line in block.splitlines()]
     commands = [shlex.split(line) for line in lines if line]
-    assert [c[1] for c in commands] == ["formats", "compare", "generate", "simulate", "simulate", "resources"]
+    assert [c[1] for c in commands] == ["formats", "compare", "explore", "generate", "simulate", "simulate"]
     monkeypatch.chdir(tmp_path)
-    formats, compare_, generate = commands[:3]  # simulate and resources: the co-simulation and resource tests
-    assert formats[-2] == ">"
-    code, out, _ = run_cli(capsys, *formats[1:-2])
-    assert code == 0
-    Path(formats[-1]).write_text(out)
+    Path("tracker.toml").write_text(toml)
+    Path("build").mkdir()
+    formats, compare_, _, generate = commands[:4]  # explore and simulate: tests/test_own_model.py
+    assert run_cli(capsys, *formats[1:])[0] == 0
     code, out, _ = run_cli(capsys, *compare_[1:], "--json")
     m = json.loads(out)
-    assert code == 0 and m["filter"] == "kalman" and m["overflows"] == 0
-    assert m["rmse_fixed_over_float"] <= 1.01, m["rmse_fixed_over_float"]
-    printed = readme.split("fixed model      ", 1)[1].split("codes", 1)[0].split()[0]
+    assert code == 0 and m["filter"] == "kalman" and m["overflows"] == 0 and (tmp_path / "build" / "tracker.png").is_file()
+    assert abs(m["rmse_fixed_over_float"] - 1) <= 0.01, m["rmse_fixed_over_float"]
+    printed = section.split("fixed model      ", 1)[1].split("codes", 1)[0].split()[0]
     assert f"{m['rmse_fixed']:.4f}" == printed, "the README's compare output is stale"
-    code, _, err = run_cli(capsys, *generate[1:], "--no-lint")
-    assert code == 0 and (tmp_path / "build" / "ca3" / "kfpga_top.v").is_file(), err
+    code, _, err = run_cli(capsys, *generate[1:], "--no-lint", "--quiet")
+    assert code == 0 and (tmp_path / "build" / "tracker" / "kfpga_top.v").is_file(), err
+

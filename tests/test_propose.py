@@ -75,3 +75,14 @@ def test_propose_keeps_pinned_formats_and_refuses_bad_options(capsys, tmp_path):
     assert "pinned by the config (kept)" in out.read_text()
     code, _, err = run(capsys, "propose", "--out", str(tmp_path / "p.txt"), "--samples", "500")
     assert code == 2 and "--out" in err and ".toml" in err
+
+
+@pytest.mark.parametrize("variant", ["steady", "full"])
+def test_the_proposal_holds_on_seeds_it_did_not_see(proposal, variant, capsys):
+    """Searched on seeds 3..6; compare confirms it within the 1 % budget on five others."""
+    for other in (101, 202, 303, 404, 505):
+        code, out, _ = run(capsys, "compare", "--config", str(proposal), "--variant", variant, "--samples", "4000",
+                           "--seed", str(other), "--json")
+        m = json.loads(out)
+        assert code == 0 and m["overflows"] == 0, (variant, other)
+        assert abs(m["rmse_fixed_over_float"] - 1) <= 0.01, (variant, other, m["rmse_fixed_over_float"])

@@ -17,7 +17,6 @@ from kfpga.core import registry
 from kfpga.core.errors import UsageError
 
 EXIT_USAGE = 2
-SCENARIO_NAMES = ("sine", "random-accel", "model")
 PLOT_EXTENSIONS = (".png", ".svg", ".pdf")
 
 
@@ -121,7 +120,37 @@ def load_config(args, *, hardware=False):
         if args.variant is None:
             args.variant = config.spec.default_variant
         (config.require_hardware if hardware else config.require_variant)(args.variant)
+    _check_period(config)
+    _scenario(args, config)
     return config
+
+
+def _scenario(args, config):
+    """``--scenario``: one the filter knows (its default when not given and no file is)."""
+    if not hasattr(args, "scenario") or getattr(args, "input", None):
+        return
+    known = config.spec.scenarios
+    if args.scenario is None:
+        args.scenario = known[0]
+    elif args.scenario not in known:
+        raise UsageError(f"--scenario: the {config.filter} filter's scenarios are {', '.join(known)}, not "
+                         f"{args.scenario!r}")
+
+
+def _check_period(config):
+    """A model's sample period against the board's rate: refused when the filter's arithmetic uses
+    the period (a rate scaled by T would be wrong by their ratio), else a warning."""
+    rate, spec = config.board.sample_rate_hz, config.spec
+    if rate is None or spec.period is None:
+        return
+    seconds, used = spec.period(config.params)
+    if abs(rate * seconds - 1.0) <= 0.01:
+        return
+    text = (f"[model] T = {seconds:g} s is a rate of {1 / seconds:g} Hz, but [board] sample_rate_hz = {rate:g}: "
+            "the filter would update at another rate than its model's")
+    if used:
+        raise UsageError(text + "; make them agree")
+    print(f"warning: {text} (its F holds T)", file=sys.stderr)
 
 
 def warn_precision(config):
@@ -208,9 +237,10 @@ def add_filter_args(p, variant=True):
 def add_signal_args(p, *, files=False):
     """--scenario, --input (``files``: repeatable), --clip, --samples, --seed, --config, --settle."""
     add_filter_args(p)
-    p.add_argument("--scenario", choices=SCENARIO_NAMES,
-                   help="test signal when --input is not given: the paper's sine plus white noise of variance R (each "
-                        "observation its own), a random-acceleration track, or the model's own process (default: sine)")
+    p.add_argument("--scenario", metavar="NAME",
+                   help="test signal when --input is not given: sine (the paper's, plus white noise of variance R; "
+                        "each axis its own), random-accel (a random-acceleration track), model (the model's own "
+                        "process); a filter may have its own ('kfpga filters' lists them; default: its first)")
     if files:
         p.add_argument("--input", metavar="CSV", action="append",
                        help="a recording to use instead of a scenario: its input columns and its 'truth' (repeat "
@@ -237,6 +267,9 @@ def add_design_args(p, channels_help):
                    help="the core: parallel (the update over pipeline stages), sequential (one operation at a time), "
                         "or auto: the cheapest design whose estimated Fmax is at least 1.25 x the clock and whose "
                         "throughput covers the sample rate (see 'kfpga explore'; default: auto)")
+    p.add_argument("--stages", type=positive_int, metavar="N",
+                   help="with --architecture parallel: the register stages of the filter's loop (default: the "
+                        "core's; 'kfpga explore' lists what each gives)")
     add_prefilter_args(p)
 
 
@@ -267,11 +300,24 @@ def explore(config, variant, channels, *, quiet=False):
 
 
 def check_architecture(args, config):
-    """Refuse an ``--architecture`` that cannot run the variant (before anything is printed)."""
+    """Refuse an ``--architecture`` that cannot run the variant, and ``--stages`` that does not
+    apply or that the loop does not have (before anything is printed)."""
     if args.architecture != "auto":
         why = config.spec.why_not(args.variant, config.params, args.architecture)
         if why:
             raise UsageError(f"--architecture {args.architecture}: {why}")
+    stages = getattr(args, "stages", None)
+    if stages is None:
+        return
+    if args.architecture != "parallel":
+        raise UsageError("--stages applies with --architecture parallel (the sequential core has no stages; auto "
+                         "chooses them)")
+    from kfpga.hw.generate import figures_only
+
+    try:
+        figures_only(config.spec.make_core(config, args.variant, architecture="parallel", stages=stages))
+    except (ValueError, TypeError) as exc:
+        raise UsageError(f"--stages: {exc}") from None
 
 
 def architecture(args, config, channels):
@@ -283,7 +329,6 @@ def architecture(args, config, channels):
     args.candidates = None
     if chosen != "auto":
         check_architecture(args, config)
-        args.stages = None
         return chosen
     found = explore(config, args.variant, channels, quiet=getattr(args, "quiet", False))
     args.candidates = found
@@ -373,7 +418,6 @@ def check_signal_args(args):
     else:
         if args.clip:
             not_with("--clip", "a scenario", "scenarios stay within the 16-bit range; --clip is for --input files")
-        args.scenario = args.scenario or "sine"
 
 
 def _file_samples(args, config, command, need_truth, notes):
@@ -470,7 +514,8 @@ def add_adc_source_args(p):
     p.add_argument("--samples", type=positive_int, metavar="N",
                    help="estimates to check (default: 2000, or every row of --input; at most those)")
     p.add_argument("--seed", type=seed_type, metavar="S", help="noise seed of the ADC inputs (default: random, printed)")
-    p.add_argument("--scenario", choices=SCENARIO_NAMES, help="ADC input signal (default: sine)")
+    p.add_argument("--scenario", metavar="NAME", help="ADC input signal: sine, random-accel, model, or the filter's "
+                                                      "own ('kfpga filters'; default: its first)")
     p.add_argument("--input", metavar="CSV", help="replay a CSV on the ADC inputs: y0..y5, or y on all six")
 
 
@@ -495,7 +540,6 @@ def adc_source_params(args, config):
         args.seed = 0  # the source is the file; the seed names the run only
     else:
         args.samples = 2000 if args.samples is None else args.samples
-        args.scenario = args.scenario or "sine"
         args.seed = pick_seed(args.seed)
         info(f"seed {args.seed} (replay with --seed {args.seed})")
     return {"variant": args.variant, "six": args.channels == 6, "channel": args.adc[0] if args.adc else None,

@@ -21,7 +21,7 @@ def run(args):
              "inputs": [n for n, _ in s.inputs_for(s.params())],
              "outputs": [o.name for o in s.outputs_for(s.params())], "source": s.source,
              "presets": {n: summary for n, (summary, _) in s.presets.items()},
-             "evaluation": s.evaluation is not None,
+             "evaluation": s.evaluation is not None, "scenarios": list(s.scenarios),
              "default": s.name == registry.DEFAULT} for s in registry.specs()]
     if args.json:
         common.emit_json(rows)
@@ -31,7 +31,8 @@ def run(args):
         print(f"{r['name']:<10} {r['summary']}{' (default)' if r['default'] else ''}{also}")
         for name, summary in r["variants"].items():
             print(f"  --variant {name:<9} {summary}")
-        print(f"  inputs {', '.join(r['inputs'])}; outputs {', '.join(r['outputs'])}; source: {r['source']}")
+        print(f"  inputs {', '.join(r['inputs'])}; outputs {', '.join(r['outputs'])}; scenarios "
+              f"{', '.join(r['scenarios'])}; source: {r['source']}")
         for name, summary in r["presets"].items():
             print(f"  --preset {name:<10} {summary}")
         if r["evaluation"]:

@@ -92,7 +92,9 @@ def _timing(args, config, architecture):
     if design.fmax_mhz >= clock:
         return record
     better = choose(every)
-    alternative = f"; {better.label} meets it (--architecture {better.architecture})" if better else ""
+    how = f"--architecture {better.architecture}" + (f" --stages {better.stages}" if better and better.stages else "") \
+        if better else ""
+    alternative = f"; {better.label} meets it ({how})" if better else ""
     message = (f"the {design.label} design is estimated at {design.fmax_mhz:g} MHz, below the {clock:g} MHz clock "
                f"(worst path {design.worst_path}){alternative}")
     if not args.ignore_timing:

@@ -320,6 +320,12 @@ class FilterSpec:
         A :class:`Prefilter` if it can stand before another filter on the board.
     mutation:
         ``mutation() -> [MutationBlock, ...]``: its cores for ``make mutate``.
+    scenarios:
+        The names its ``scenario`` hook (or the generic scenarios) knows, the default first.
+    period:
+        ``period(params) -> (seconds, used)``: the sample period the model is made for, and whether
+        its arithmetic uses it (a rate scaled by T) or only describes it; ``None``: the model has
+        no period (a board rate is then its own choice).
     formal_config:
         ``formal_config() -> FilterConfig``: a narrow instance for the formal stream-contract
         checks (``make formal``), for a core whose default datapath is too wide for the solver at
@@ -355,6 +361,8 @@ class FilterSpec:
     modes: tuple = ()
     prefilter: Prefilter | None = None
     mutation: Callable | None = None
+    period: Callable | None = None
+    scenarios: tuple = ("sine", "random-accel", "model")
 
     def __post_init__(self):
         object.__setattr__(self, "points", MappingProxyType(dict(self.points)))

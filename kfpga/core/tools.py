@@ -47,6 +47,12 @@ def verilator_env(env=None):
         return env
     env["VERILATOR_ROOT"] = str(root)
     env["PATH"] = os.pathsep.join([str(root / "bin"), str(Path(sys.executable).parent), env.get("PATH", "")])
+    # the PyPI build's verilated.mk names the precompiled header without GCC's -include, so a design
+    # large enough for Verilator to use one fails to compile ("Vtop__pch.h.fast: linker input file
+    # not found"; verilator/verilator#5724): give make the flag
+    flag = "CFG_CXXFLAGS_PCH_I=-include"
+    if flag not in env.get("MAKEFLAGS", ""):
+        env["MAKEFLAGS"] = f"{env.get('MAKEFLAGS', '')} {flag}".strip()
     return env
 
 

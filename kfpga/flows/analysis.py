@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -54,6 +55,9 @@ class Comparison:
     settle: int
     output: str = "x1"
     extra: dict = field(default_factory=dict)
+    fixed_all: dict = field(default_factory=dict)  # every output, fixed and float (the plot's)
+    float_all: dict = field(default_factory=dict)
+    period: float | None = None  # the model's sample period in seconds, if it has one
 
 
 def compare(config, variant, y, truth=None, *, settle=None, seed=None, scenario=None, limit_cycle=True):
@@ -119,7 +123,8 @@ def compare(config, variant, y, truth=None, *, settle=None, seed=None, scenario=
     if limit_cycle:
         lc = limit_cycles(config, variant)
         metrics.update(limit_cycle_lsb=lc["limit_cycle_lsb"], dead_band_lsb=lc["dead_band_lsb"], limit_cycle=lc)
-    return Comparison(metrics, raw, truth, flx1, fx1, lsb, settle, main)
+    return Comparison(metrics, raw, truth, flx1, fx1, lsb, settle, main, fixed_all=dict(fixed),
+                      float_all={name: flt[name] for name in fixed}, period=getattr(config.params, "T", None))
 
 
 def limit_cycles(config, variant, *, samples=LIMIT_CYCLE_SAMPLES, window=LIMIT_CYCLE_WINDOW, floats=None):
@@ -229,54 +234,110 @@ def sweep(params, variant, y, truth, widths, *, settle=None, range_source="scena
     return rows, narrowest
 
 
+def _rolling_rms(x, window):
+    """The rms of ``x`` over a sliding ``window`` (centred; shorter at the ends)."""
+    x = np.asarray(x, dtype=np.float64)
+    if window <= 1 or len(x) <= window:
+        return np.abs(x)
+    c = np.concatenate([[0.0], np.cumsum(x * x)])
+    k = np.arange(len(x))
+    lo, hi = np.maximum(0, k - window // 2), np.minimum(len(x), k + window // 2 + 1)
+    return np.sqrt((c[hi] - c[lo]) / (hi - lo))
+
+
+def _envelope(x, bins):
+    """``(centres, low, high)``: the smallest and largest of ``x`` in ``bins`` equal slices."""
+    x = np.asarray(x, dtype=np.float64)
+    edges = np.linspace(0, len(x), min(bins, len(x)) + 1).astype(int)
+    lows = np.array([x[a:b].min() for a, b in itertools.pairwise(edges)])
+    highs = np.array([x[a:b].max() for a, b in itertools.pairwise(edges)])
+    return (edges[:-1] + edges[1:]) / 2, lows, highs
+
+
+def _figures_text(m):
+    lines = []
+    if m.get("rmse_float") is not None:
+        lines.append(f"RMSE of {m['field']} vs truth: float {m['rmse_float']:.4g}, fixed {m['rmse_fixed']:.4g} "
+                     f"({100 * (m['rmse_fixed_over_float'] - 1):+.3f} %)")
+    lines.append("SQNR fixed vs float: " + ", ".join(f"{name} {f['sqnr_db']:.1f} dB" for name, f in m["fields"].items()))
+    lines.append(f"overflows: {m['overflows']} sample(s)")
+    return "\n".join(lines)
+
+
 def plot_compare(cmp_, path, title=""):
-    """Overview, a zoomed window, the estimation errors and the fixed - float difference."""
+    """One figure of a comparison: the main output with truth and input (all samples and a zoom),
+    its estimation error as a rolling RMS, every other output (float and fixed), and the fixed -
+    float difference of the main output as an envelope and a histogram in LSB; the figures (RMSE,
+    SQNR, overflows) written on it. The time axis is in seconds when the model has a period T."""
     plt = pyplot()
     n = len(cmp_.fixed_out)
-    k = np.arange(n)
+    period = cmp_.period
+    k = np.arange(n) * (period or 1.0)
+    unit = "time (s)" if period else "sample"
     raw = cmp_.y  # None when no input observes the plotted output itself
     label = f"noisy input {cmp_.metrics.get('measured_input') or 'y'}"
-    # the zoom: 60 samples around the largest |signal| after settling (a peak, where the slope
-    # is small), so single noisy samples and the two estimates can be told apart
+    others = [name for name in cmp_.fixed_all if name != cmp_.output]
+    rows = 4 + len(others)
+    fig = plt.figure(figsize=(12, 3 * rows), constrained_layout=True)
+    grid = fig.add_gridspec(rows, 4)
     ref = cmp_.truth if cmp_.truth is not None else cmp_.float_out
     centre = cmp_.settle + int(np.argmax(np.abs(ref[cmp_.settle:])))
     z0 = min(max(centre - 30, 0), max(n - 60, 0))
     z = slice(z0, min(z0 + 60, n))
-    fig, axes = plt.subplots(4, 1, figsize=(11, 12), constrained_layout=True)
-    ax = axes[0]
+    ax = fig.add_subplot(grid[0, :])
     if raw is not None:
         ax.plot(k, raw, lw=0.4, color="0.7", label=label)
     if cmp_.truth is not None:
         ax.plot(k, cmp_.truth, lw=1.0, color="k", label="truth")
     ax.plot(k, cmp_.fixed_out, lw=0.8, color="tab:red", label=f"fixed {cmp_.output}")
-    ax.axvspan(z.start, z.stop, color="tab:orange", alpha=0.2, label="zoom below")
-    ax.set_ylabel("ADC codes")
+    ax.axvspan(k[z.start], k[z.stop - 1], color="tab:orange", alpha=0.2, label="zoom below")
+    ax.set_ylabel(f"{cmp_.output} (input units)")
     ax.legend(loc="upper right", fontsize=8)
     ax.set_title(title)
-    ax = axes[1]
+    ax.text(0.01, 0.97, _figures_text(cmp_.metrics), transform=ax.transAxes, va="top", fontsize=8,
+            bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "0.7"})
+    ax = fig.add_subplot(grid[1, :])
     if raw is not None:
         ax.plot(k[z], raw[z], ".", ms=5, color="0.55", label=label)
     if cmp_.truth is not None:
         ax.plot(k[z], cmp_.truth[z], lw=1.4, color="k", label="truth")
     ax.plot(k[z], cmp_.float_out[z], lw=1.0, color="tab:blue", label=f"float {cmp_.output}")
     ax.plot(k[z], cmp_.fixed_out[z], lw=1.0, ls="--", color="tab:red", label=f"fixed {cmp_.output}")
-    ax.set_ylabel("ADC codes (zoom)")
+    ax.set_ylabel(f"{cmp_.output} (zoom)")
     ax.legend(loc="upper right", fontsize=8)
-    ax = axes[2]
+    window = max(n // 200, 1)
+    ax = fig.add_subplot(grid[2, :])
     if cmp_.truth is not None:
         if raw is not None:
-            ax.plot(k, raw - cmp_.truth, lw=0.3, color="0.8", label="input - truth")
-        ax.plot(k, cmp_.float_out - cmp_.truth, lw=0.4, color="tab:blue", label="float - truth")
-        ax.plot(k, cmp_.fixed_out - cmp_.truth, lw=0.4, color="tab:red", alpha=0.6, label="fixed - truth")
-        ax.axvline(cmp_.settle, color="0.4", ls=":", lw=0.8, label="end of settling")
+            ax.plot(k, _rolling_rms(raw - cmp_.truth, window), lw=0.8, color="0.6", label="input - truth")
+        ax.plot(k, _rolling_rms(cmp_.float_out - cmp_.truth, window), lw=0.9, color="tab:blue", label="float - truth")
+        ax.plot(k, _rolling_rms(cmp_.fixed_out - cmp_.truth, window), lw=0.9, ls="--", color="tab:red",
+                label="fixed - truth")
+        ax.axvline(k[min(cmp_.settle, n - 1)], color="0.4", ls=":", lw=0.8, label="end of settling")
         ax.legend(loc="upper right", fontsize=8)
+        ax.set_ylabel(f"error, rolling rms\n({window} samples)")
     else:
         ax.text(0.5, 0.5, "no truth in the input", ha="center", transform=ax.transAxes)
-    ax.set_ylabel("estimation error (codes)")
-    ax = axes[3]
-    ax.plot(k, (cmp_.fixed_out - cmp_.float_out) / cmp_.lsb, lw=0.4, color="tab:purple")
-    ax.set_ylabel(f"fixed - float\n(LSB of {cmp_.output} = {cmp_.lsb:g})")
-    ax.set_xlabel("sample")
+    for row, name in enumerate(others, start=3):
+        ax = fig.add_subplot(grid[row, :])
+        ax.plot(k, cmp_.float_all[name], lw=0.8, color="tab:blue", label=f"float {name}")
+        ax.plot(k, cmp_.fixed_all[name], lw=0.8, ls="--", color="tab:red", label=f"fixed {name}")
+        ax.set_ylabel(name)
+        ax.legend(loc="upper right", fontsize=8)
+    diff = (cmp_.fixed_out - cmp_.float_out) / cmp_.lsb
+    ax = fig.add_subplot(grid[rows - 1, :3])
+    centres, lows, highs = _envelope(diff, 400)
+    ax.fill_between(centres * (period or 1.0), lows, highs, color="tab:purple", alpha=0.4, lw=0, label="range")
+    ax.plot(k, _rolling_rms(diff, window), lw=0.8, color="tab:purple", label="rolling rms")
+    ax.set_ylabel(f"fixed - float of {cmp_.output}\n(LSB = {cmp_.lsb:g})")
+    ax.set_xlabel(unit)
+    ax.legend(loc="upper right", fontsize=8)
+    ax = fig.add_subplot(grid[rows - 1, 3])
+    ax.hist(diff[cmp_.settle:], bins=60, color="tab:purple", alpha=0.7)
+    ax.set_xlabel("fixed - float (LSB)")
+    ax.set_ylabel("samples")
+    for a in fig.axes[:-2]:
+        a.set_xlabel(unit)
     fig.savefig(path, dpi=100)
     plt.close(fig)
 

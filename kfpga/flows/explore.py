@@ -66,7 +66,7 @@ class Candidate:
 
     @property
     def label(self):
-        return self.architecture + ("" if self.stages is None else f", {self.stages} stages")
+        return self.architecture + ("" if self.stages is None else f", {self.stages} stage{'s' if self.stages > 1 else ''}")
 
     def as_dict(self):
         return {**asdict(self), "meets": self.meets, "within_clock": self.within_clock, "label": self.label}

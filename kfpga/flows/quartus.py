@@ -305,11 +305,18 @@ def _readme(variant, six_channel, ratio, manifest):
         f"channel {manifest['channel']}" if len(adc) == 1 else
         "channels " + ", ".join(f"{c} ({name})" for name, c in adc.items()) + ", one update per conversion")
     out = manifest["out_data"]
+    rate = (f"a conversion every {manifest['conversion_period_cycles']} system cycles ({manifest['sample_rate_hz']:g} Hz)"
+            if manifest["sample_rate_hz"] else "the ADC converting as fast as the core takes samples")
+    est = manifest.get("timing")
+    timing = "" if not est else (
+        f"\nEstimated Fmax {est['fmax_mhz_estimate']:g} MHz on the -8 part (Yosys and FloPoCo's delays, no place and "
+        f"route)" + (": BELOW the clock, written anyway (--ignore-timing)" if est.get("ignored") else "") + ".")
     return f"""kfpga {__version__}: Quartus II 13.0sp1 project for the {DEVICE_ORDERING} (Cyclone II)
 
-Design: ADS8364 controller + {manifest['filter']} filter, {variant} core, {where}, ADC clock = 50 MHz / {ratio}.
+Design: ADS8364 controller + {manifest['filter']} filter, {variant} variant on the {manifest['core']['architecture']} core,
+{where}, ADC clock = 50 MHz / {ratio}, {rate}.
 out_data: {out['field']}, {out['format']} ({out['width']} bits).
-Core latency {manifest['core']['latency_cycles']} cycles, {manifest['core']['cycles_per_update']} cycle(s) per update.
+Core latency {manifest['core']['latency_cycles']} cycles, {manifest['core']['cycles_per_update']} cycle(s) per update.{timing}
 
 Compile (Quartus II 13.0sp1 is the last Quartus with Cyclone II):
 
