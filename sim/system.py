@@ -83,8 +83,8 @@ def make_source(params, count):
         source = csv_source(params["csv"], clip=params.get("clip", False), config=config, adc=adc)
         source.glitches = glitches
         return source
-    return scenario_source(params.get("scenario", "sine"), count, params["seed"], config.params, glitches=glitches,
-                           config=config, adc=adc)
+    return scenario_source(params.get("scenario") or config.spec.scenarios[0], count, params["seed"], config.params,
+                           glitches=glitches, config=config, adc=adc)
 
 
 def conversions_for(params, samples):
