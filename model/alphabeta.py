@@ -43,6 +43,7 @@ from kfpga.core.formats import register_formats
 from kfpga.core.params import number, vector
 from kfpga.core.spec import Constant, FilterSpec, Mode, MutationBlock, Output, Variant
 from kfpga.model import cvloop as eq
+from kfpga.model import start
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
 from kfpga.model.reference import steady_error_std
 
@@ -97,6 +98,9 @@ class AlphaBetaParams:
         against the error that noise leaves) and the ranges.
     x0:
         State after reset ``(x, v)``.
+    init:
+        ``"state"``: start from ``x0``; ``"measurement"``: each track from its first two plots
+        (``model/start.py``).
 
     Raises ``TypeError`` for a value of the wrong type and ``ValueError`` for a wrong value,
     the message starting with the field's name.
@@ -107,9 +111,11 @@ class AlphaBetaParams:
     T: float = 1.0
     R: float = 4.0
     x0: tuple = (0.0, 0.0)
+    init: str = "state"
 
     def __post_init__(self):
         s = object.__setattr__
+        s(self, "init", start.check_init(self.init))
         s(self, "alpha", number("alpha", self.alpha))
         s(self, "beta", number("beta", self.beta))
         s(self, "T", number("T", self.T, minimum=0.0, strict=True))
@@ -131,7 +137,7 @@ def from_kalman(params):
     """The alpha-beta parameters equal to the steady-state filter of ``KalmanParams``: alpha = K1,
     beta = T K2, the same T, R and x0."""
     k1, k2 = eq.steady_gain(params)
-    return AlphaBetaParams(alpha=k1, beta=k2, T=params.T, R=params.R, x0=params.x0)
+    return AlphaBetaParams(alpha=k1, beta=k2, T=params.T, R=params.R, x0=params.x0, init=params.init)
 
 
 POINTS = {name: point for name, point in eq.POINTS.items() if name in eq.LOOP_POINTS}
@@ -143,22 +149,24 @@ def update(ops, k, x, u):
     e = eq.innovation(ops, u["z"], xl1)                               # e = z - xp
     x1 = eq.correct(ops, xl1, ops.mul(k["k1"], e), "x1")              # x = xp + alpha e
     v = eq.correct(ops, x["v"], ops.mul(k["k2"], e), "v")             # T v = T v + beta e
-    return {"x1": x1, "v": v}, {"x": x1, "v": eq.rate(ops, k, v)}
+    x1, v, count = eq.measured_start(ops, k, x, u["z"], x1, v)        # init = "measurement": the first two plots
+    return {"x1": x1, "v": v, **count}, {"x": x1, "v": eq.rate(ops, k, v)}
 
 
 def _constants(params):
     # named k1, k2 as the steady-state Kalman core's gains: the same steps build both cores
     return {"k1": Constant(params.alpha, "gain", "alpha"), "k2": Constant(params.beta, "gain", "beta"),
-            **eq.rate_constants(params)}
+            **eq.rate_constants(params), **start.start_constants(params)}
 
 
 def _initial(params):
-    return {"x1": params.x0[0], "v": params.x0[1] * params.T}
+    return {"x1": params.x0[0], "v": params.x0[1] * params.T, **({"start": 0.0} if start.measured(params) else {})}
 
 
 VARIANTS = {
     "steady": Variant("steady", "constant gains alpha, beta: one update per sample, no multiplier for a power-of-two gain",
-                      (("x1", "x1"), ("v", "v")), _constants, _initial, update),
+                      lambda params: (("x1", "x1"), ("v", "v"), *start.start_state(params)), _constants, _initial,
+                      update, hardware=start.hardware),
 }
 
 
@@ -172,8 +180,7 @@ def reference(params, variant, z):
     for n in range(z.shape[-1]):
         xp = x + params.T * v
         e = z[..., n] - xp
-        x = xp + a * e
-        v = v + b * e
+        x, v = start.measured_start_float(params, n, z[..., n], x, v, xp + a * e, v + b * e)  # init = "measurement"
         out["x"][..., n], out["v"][..., n] = x, v
     return out
 
@@ -201,6 +208,7 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
     err = _error_std(params)
     noise = {"x1": err["x"], "v": params.T * err["v"], "vt": params.T * err["v"], "x2": err["v"]}
     formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, noise=noise)
+    eq.loop_formats(formats, (params.alpha, params.beta), (noise["x1"], noise["v"]))  # the rounding the loop feeds back
     return eq.finish_formats(params, formats, state_frac=state_frac)
 
 

@@ -24,10 +24,12 @@ from kfpga.core.board import WORST_PATH_GOAL_NS
 from kfpga.core.fixed import QFormat, Rounding
 from kfpga.core.formats import noise_frac_bits
 from kfpga.core.spec import Constant, Point
+from kfpga.model import start
 from kfpga.model.reference import steady_state_gain
+from kfpga.model.riccati import loop_frac_bits
 
 __all__ = ["POINTS", "LOOP_POINTS", "t_exponent", "steady_gain", "predict", "innovation", "correct", "rate_operand",
-           "rate_product", "rate_write", "rate", "rate_constants", "finish_formats", "steady_goals", "stressed"]
+           "rate_product", "rate_write", "rate", "rate_constants", "finish_formats", "steady_goals", "stressed", "measured_start", "loop_formats"]
 
 #: The points of the paper's filter; the loop's are :data:`LOOP_POINTS`.
 POINTS = {
@@ -83,6 +85,19 @@ def correct(ops, x, ke, point):
     return ops.rq(ops.add(x, ke), point)
 
 
+def measured_start(ops, k, x, y, x1, v):
+    """``(x1, v, {"start": count})`` with the start from the measurements (``model/start.py``)
+    when the constants ``k`` have it: x1 = y on samples 0 and 1, v = y - x1 (the previous x1,
+    which is y0) on sample 1; else ``(x1, v, {})`` unchanged."""
+    if "start" not in k:
+        return x1, v, {}
+    starting, second, count = start.phase(ops, k, x["start"])
+    x1 = ops.select(starting, ops.rq(y, "x1", "x1_start"), x1)                        # x1 = y
+    v = ops.select(second, ops.rq(ops.sub(y, x["x1"]), "v", "v_start"),            # v = y1 - y0
+                   ops.select(starting, x["v"], v))
+    return x1, v, {"start": count}
+
+
 def rate_operand(ops, k, v):
     """The first step of x2 = v / T: v with its binary point moved by k when T = 2**k, else v
     rounded into the 18-bit multiplier operand vt."""
@@ -129,6 +144,19 @@ def finish_formats(params, formats, *, state_frac):
     if k is not None and fv.int_bits - k >= 1 and fv.frac_bits + k >= 0:
         # x2 = v / 2**k: the same bits, the binary point moved (a free shift)
         formats["x2"] = QFormat(fv.int_bits - k, fv.frac_bits + k, Rounding.NEAREST)
+    return formats
+
+
+def loop_formats(formats, gain, floors):
+    """x1 (and xl1) and v fine enough for the rounding the loop feeds back
+    (:func:`~kfpga.model.riccati.loop_frac_bits` with ``Phi = [[1, 1], [0, 1]]`` in the datapath's
+    units): ``gain`` the loop's ``(k1, k2)``, ``floors`` the float filter's error of x1 and v."""
+    needs = loop_frac_bits([[1.0, 1.0], [0.0, 1.0]], [[1.0, 0.0]], [[gain[0]], [gain[1]]], floors)
+    for names, need in ((("x1", "xl1"), needs[0]), (("v",), needs[1])):
+        fmt = formats[names[0]]
+        if need is not None and need > fmt.frac_bits:
+            for name in names:
+                formats[name] = QFormat(formats[name].int_bits, need, formats[name].rounding, formats[name].overflow)
     return formats
 
 

@@ -49,8 +49,9 @@ from kfpga.core.formats import (
 )
 from kfpga.core.params import matrix, number
 from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
+from kfpga.model import start
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
-from kfpga.model.riccati import PBHError, check_pbh, dare
+from kfpga.model.riccati import PBHError, check_pbh, dare, loop_frac_bits
 
 __all__ = ["StateSpaceParams", "SPEC", "PRESETS", "dare_gain", "reference", "steady_update", "full_update", "free",
            "PBHError", "predict_operands", "predict_terms", "predict_sums", "predict", "observe", "innovations",
@@ -100,6 +101,10 @@ class StateSpaceParams:
     adc:
         The ADS8364 channel (0..5 = A0..C1) of each observation on the board; default: A0 for
         one observation (or ``--channel``), A0 and A1 for two.
+    init:
+        ``"state"``: start from ``x0``; ``"measurement"``: each state an observation selects
+        alone from the first sample, the state that moves it (its rate) from the first two
+        (:func:`start_plan`, ``model/start.py``).
     """
 
     F: tuple = ((1.0, 1.0), (0.0, 1.0))
@@ -113,9 +118,11 @@ class StateSpaceParams:
     observations: tuple = ()
     gain: tuple | None = None
     adc: tuple | None = None
+    init: str = "state"
 
     def __post_init__(self):
         s = object.__setattr__
+        s(self, "init", start.check_init(self.init))
         n, cols = _square("F", self.F)
         if not 1 <= n <= MAX_STATES or cols != n:
             raise ValueError(f"F must be n x n with n = 1..{MAX_STATES} states, not {n} x {cols}")
@@ -169,6 +176,9 @@ class StateSpaceParams:
                 raise ValueError(f"adc must be {m} different ADC channels 0..5 (A0..C1), one per observation, "
                                  f"not {self.adc!r}")
             s(self, "adc", tuple(adc))
+        if start.measured(self) and not start_plan(self)[0]:
+            raise ValueError('init = "measurement" needs an observation that selects one state alone (a row of H '
+                             "with one nonzero entry): no state of this model is measured by itself")
 
     def adc_channels(self, default=0):
         """The ADC channel of each observation (``default`` for one observation not given one)."""
@@ -208,6 +218,74 @@ def exact_format(value):
     return QFormat(max(2, k + 2), max(0, -k))
 
 
+def start_plan(params):
+    """What the start from the measurements sets: ``({state j: (observation i, h)}, {state r:
+    (position j, F[j][r])})``. A position is a state that a row of H selects alone (``y_i =
+    h x_j``); its rate is the one other state that moves it in F directly (``F[j][r] != 0``, and
+    ``x_r`` not itself feeding another such state: the acceleration of a constant-acceleration model
+    moves the position through ``T**2/2`` as well, but it feeds the velocity, which is the rate).
+    A position with no such state, or with several, keeps its rates at x0."""
+    n = len(params.F)
+    positions = {}
+    for i, row in enumerate(params.H):
+        picks = [j for j, h in enumerate(row) if h != 0]
+        if len(picks) == 1 and picks[0] not in positions:
+            positions[picks[0]] = (i, float(row[picks[0]]))
+    rates = {}
+    for j in positions:
+        movers = [r for r in range(n) if r != j and r not in positions and params.F[j][r] != 0]
+        direct = [r for r in movers if not any(params.F[c][r] != 0 for c in movers if c != r)]
+        if len(direct) == 1 and direct[0] not in rates:
+            rates[direct[0]] = (j, float(params.F[j][direct[0]]))
+    return positions, rates
+
+
+def _reciprocal(value):
+    """``1 / value`` as a constant: exact when it is +-2**k, else with the multiplier's significant bits."""
+    inv = 1.0 / value
+    if free(inv):
+        return exact_format(inv)
+    return QFormat(max(2, math.floor(math.log2(abs(inv))) + 2), constant_frac_bits(inv))
+
+
+def _start_constants(params):
+    """The constants of the start: 1/h of each position, 1/F[j][r] of each rate."""
+    if not start.measured(params):
+        return {}
+    positions, rates = start_plan(params)
+    out = dict(start.start_constants(params))
+    for j, (_, h) in positions.items():
+        out[f"start_h{j}"] = Constant(1.0 / h, exact_format(1.0 / h), f"1/H[.][{j}]")
+    for r, (j, f) in rates.items():
+        out[f"start_f{r}"] = Constant(1.0 / f, _reciprocal(f), f"1/F[{j}][{r}]")
+    out["start_plan"] = (positions, rates)
+    return out
+
+
+def measured_start(ops, k, x, u, xn):
+    """The states after the start from the measurements (``model/start.py``, :func:`start_plan`)
+    and ``{"start": count}``; ``xn`` unchanged and ``{}`` without it."""
+    if "start" not in k:
+        return xn, {}
+    positions, rates = k["start_plan"]
+    starting, second, count = start.phase(ops, k, x["start"])
+    prev = [x[f"x{i + 1}"] for i in range(k["n"])]
+    seen = {j: ops.mul(k[f"start_h{j}"], u[k["observations"][i]]) for j, (i, _) in positions.items()}  # y / h
+    out = []
+    for s, value in enumerate(xn):
+        if s in positions:                                                        # x_j = y / h
+            value = ops.select(starting, ops.rq(seen[s], f"x{s + 1}", f"x{s + 1}_start"), value)
+        elif s in rates:                                                          # x_r = (y1/h - x_j) / F_jr
+            j = rates[s][0]
+            diff = ops.mul(ops.sub(seen[j], prev[j]), k[f"start_f{s}"])
+            value = ops.select(second, ops.rq(diff, f"x{s + 1}", f"x{s + 1}_start"),
+                               ops.select(starting, prev[s], value))
+        else:                                                                     # held on sample 0
+            value = ops.select(starting, ops.select(second, value, prev[s]), value)
+        out.append(value)
+    return out, {"start": count}
+
+
 # -- the Riccati equation ----------------------------------------------------------------------
 
 
@@ -243,7 +321,9 @@ def reference(params, variant, y):
     p = np.array(params.P0, dtype=np.float64)
     k_inf = steady_gain(params) if variant == "steady" else None
     xs, yh = np.empty((steps, params.n)), np.empty((steps, params.m))
+    plan = start_plan(params) if start.measured(params) else None
     for t in range(steps):
+        prev = x
         x = f @ x                                              # x = F x
         yh[t] = h @ x                                          # yhat = H x
         if variant == "steady":
@@ -253,6 +333,8 @@ def reference(params, variant, y):
             gain = p @ h.T @ np.linalg.inv(h @ p @ h.T + r)    # K = P H^T (H P H^T + R)^-1
             p = (np.eye(params.n) - gain @ h) @ p              # P = (I - K H) P
         x = x + gain @ (ys[t] - yh[t])                         # x = x + K (y - H x)
+        if plan is not None and t < start.start_samples(params):  # init = "measurement"
+            x = np.array(start.float_start(t, ys[t], prev, x, *plan))
         xs[t] = x
     out = {f"x{i + 1}": xs[:, i] for i in range(params.n)}
     out.update({f"yhat{j + 1}": yh[:, j] for j in range(params.m)})
@@ -347,7 +429,8 @@ def steady_update(ops, k, x, u):
     yh = observe(ops, k, xl)                                          # yh = H xl
     e = innovations(ops, k, u, yh)                                    # e = y - yh
     xn = correct(ops, k, xl, gain_products(ops, k, e))                # x = xl + K e
-    return {f"x{i + 1}": xn[i] for i in range(k["n"])}, _outputs(k, xn, yh)
+    xn, count = measured_start(ops, k, x, u, xn)                      # init = "measurement"
+    return {**{f"x{i + 1}": xn[i] for i in range(k["n"])}, **count}, _outputs(k, xn, yh)
 
 
 def _pname(i, j):
@@ -444,7 +527,9 @@ def full_update(ops, k, x, u):
     else:
         gains = gains_two(ops, k, hp)                                 # K = Pl H^T S^-1
     state = update_corrections(ops, k, xl, pl, update_products(ops, k, gains, e, hp))  # x += K e; P -= K H Pl
-    return state, _outputs(k, [state[f"x{i + 1}"] for i in range(n)], yh)
+    xn, count = measured_start(ops, k, x, u, [state[f"x{i + 1}"] for i in range(n)])  # init = "measurement"
+    state.update({f"x{i + 1}": xn[i] for i in range(n)}, **count)
+    return state, _outputs(k, xn, yh)
 
 
 # -- what the spec needs ----------------------------------------------------------------------------
@@ -478,7 +563,7 @@ def _steady_constants(params):
     for i in range(params.n):
         for j in range(params.m):
             consts[f"K{i}{j}"] = Constant(float(gain[i][j]), f"k{i + 1}", f"K[{i}][{j}]")
-    return {**consts, "free": flags, **_structure(params)}
+    return {**consts, "free": flags, **_structure(params), **_start_constants(params)}
 
 
 def _full_constants(params):
@@ -492,11 +577,11 @@ def _full_constants(params):
     for a in range(m):
         for b in range(a, m):
             consts[f"R{a}{b}"] = Constant(float(r[a][b]), "s" if m == 1 else f"s{a + 1}{b + 1}", f"R[{a}][{b}]")
-    return {**consts, "free": flags, **_structure(params)}
+    return {**consts, "free": flags, **_structure(params), **_start_constants(params)}
 
 
 def _initial(params):
-    return {f"x{i + 1}": params.x0[i] for i in range(params.n)}
+    return {**{f"x{i + 1}": params.x0[i] for i in range(params.n)}, **({"start": 0.0} if start.measured(params) else {})}
 
 
 def _full_initial(params):
@@ -548,7 +633,7 @@ def _full_hardware(params):
 
 
 def _steady_state(params):
-    return tuple((f"x{i + 1}", f"x{i + 1}") for i in range(params.n))
+    return tuple((f"x{i + 1}", f"x{i + 1}") for i in range(params.n)) + start.start_state(params)
 
 
 def _full_state(params):
@@ -558,10 +643,10 @@ def _full_state(params):
 
 VARIANTS = {
     "steady": Variant("steady", "constant gain K from the Riccati equation (or given): no divider",
-                      _steady_state, _steady_constants, _initial, steady_update, _steady_applies),
+                      _steady_state, _steady_constants, _initial, steady_update, _steady_applies, start.hardware),
     "full": Variant("full", "time-varying gain: P, S and a restoring divider per update (two observations: "
                             "model only)", _full_state, _full_constants, _full_initial, full_update, lambda params: None,
-                    _full_hardware, _full_settled),
+                    lambda params: start.hardware(params) or _full_hardware(params), _full_settled),
 }
 
 
@@ -709,47 +794,19 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
     return formats
 
 
-def _injected(a, v, steps=60):
-    """``sum_k A^k v v^T A^kT``: the steady covariance of a unit injection ``v`` each update into the
-    error loop ``A`` (doubling: 2**steps updates)."""
-    s, m = np.outer(v, v), a.copy()
-    for _ in range(steps):
-        s_next = s + m @ s @ m.T
-        if np.allclose(s_next, s, rtol=1e-12, atol=0):
-            break
-        s, m = s_next, m @ m
-    return s
-
-
 def _loop_formats(params, formats, err):
-    """Fraction bits of the states for the rounding the loop feeds back: a state's rounding, each
-    update, is carried by the steady error loop ``A = (I - K H) F`` (slowly forgotten when the gains
-    are small), so it adds the steady covariance of that injection to every state. Each state gets
-    the fraction bits that keep its share of every state's added error within a quarter of the
-    budget of the float filter's error floor there (:func:`~kfpga.core.formats.noise_step_frac`'s
-    rule, for the loop's amplification)."""
+    """Fraction bits of the states for the rounding the loop feeds back
+    (:func:`~kfpga.model.riccati.loop_frac_bits`); x_i and xl_i share a format."""
     if not err:
         return
     try:
         gain = steady_gain(params)
     except (ValueError, PBHError):
         return
-    f, h = np.array(params.F), np.array(params.H)
-    n = params.n
-    a = (np.eye(n) - gain @ h) @ f
-    if np.max(np.abs(np.linalg.eigvals(a))) >= 1.0:
-        return
-    share = math.sqrt((1.0 + PRECISION / 4) ** 2 - 1.0) / math.sqrt(n)
-    floors = np.array([err[f"x{j + 1}"] for j in range(n)])
-    for i in range(n):
-        v = np.zeros(n)
-        v[i] = 1.0
-        # x_i written after the correction, and xl_i (its format) before it
-        gain_sq = np.diag(_injected(a, v)) + np.diag(_injected(a, (np.eye(n) - gain @ h) @ v))
-        lsb = min(share * floors[j] * math.sqrt(12.0 / gain_sq[j]) for j in range(n) if gain_sq[j] > 0 and floors[j] > 0)
-        need = math.ceil(-math.log2(lsb))
+    floors = [err[f"x{j + 1}"] for j in range(params.n)]
+    for i, need in enumerate(loop_frac_bits(np.array(params.F), np.array(params.H), gain, floors)):
         fmt = formats[f"x{i + 1}"]
-        if need > fmt.frac_bits:
+        if need is not None and need > fmt.frac_bits:
             formats[f"x{i + 1}"] = QFormat(fmt.int_bits, need, fmt.rounding, fmt.overflow)
             formats[f"xl{i + 1}"] = formats[f"x{i + 1}"]
 

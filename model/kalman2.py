@@ -48,6 +48,8 @@ from kfpga.model.cvloop import (
     correct,
     finish_formats,
     innovation,
+    loop_formats,
+    measured_start,
     predict,
     rate,
     rate_constants,
@@ -56,6 +58,7 @@ from kfpga.model.cvloop import (
     stressed,
     t_exponent,
 )
+from kfpga.model import start
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
 from kfpga.model.reference import KalmanParams, kalman_decomposed, steady_error_std, steady_state, steady_state_gain
 
@@ -104,7 +107,8 @@ def steady_update(ops, k, x, u):
     e = innovation(ops, u["y"], xl1)                                # e = y - xl1
     x1 = correct(ops, xl1, ops.mul(k["k1"], e), "x1")               # x1 = xl1 + K1 e
     v = correct(ops, x["v"], ops.mul(k["k2"], e), "v")              # v = v + T K2 e
-    return {"x1": x1, "v": v}, {"x1": x1, "x2": rate(ops, k, v), "yhat": xl1}
+    x1, v, count = measured_start(ops, k, x, u["y"], x1, v)         # init = "measurement"
+    return {"x1": x1, "v": v, **count}, {"x1": x1, "x2": rate(ops, k, v), "yhat": xl1}
 
 
 def full_update(ops, k, x, u):
@@ -117,8 +121,9 @@ def full_update(ops, k, x, u):
     k1e, k2e, pk = full_products(ops, k1, k2, e, pl[0], pl[1])
     x1 = correct(ops, xl1, k1e, "x1")                               # x1 = xl1 + K1 e
     v = correct(ops, x["v"], k2e, "v")                              # v = v + K2 e
+    x1, v, count = measured_start(ops, k, x, u["y"], x1, v)         # init = "measurement"
     p11, p12, p21, p22 = covariance_correct(ops, pl, pk)
-    state = {"x1": x1, "v": v, "p11": p11, "p12": p12, "p21": p21, "p22": p22}
+    state = {"x1": x1, "v": v, "p11": p11, "p12": p12, "p21": p21, "p22": p22, **count}
     return state, {"x1": x1, "x2": rate(ops, k, v), "yhat": xl1}
 
 
@@ -127,17 +132,19 @@ def full_update(ops, k, x, u):
 
 def _steady_constants(params):
     k1, k2 = steady_gain(params)
-    return {"k1": Constant(k1, "gain", "K1"), "k2": Constant(k2, "gain", "T*K2"), **rate_constants(params)}
+    return {"k1": Constant(k1, "gain", "K1"), "k2": Constant(k2, "gain", "T*K2"), **rate_constants(params),
+            **start.start_constants(params)}
 
 
 def _full_constants(params):
     scaled = params.scaled()
-    return {"q": Constant(scaled.Q, "pl", "T^2*Q"), "r": Constant(params.R, "s", "R"), **rate_constants(params)}
+    return {"q": Constant(scaled.Q, "pl", "T^2*Q"), "r": Constant(params.R, "s", "R"), **rate_constants(params),
+            **start.start_constants(params)}
 
 
 def _initial(params):
     scaled = params.scaled()
-    return {"x1": scaled.x0[0], "v": scaled.x0[1]}
+    return {"x1": scaled.x0[0], "v": scaled.x0[1], **({"start": 0.0} if start.measured(params) else {})}
 
 
 def _full_initial(params):
@@ -169,10 +176,12 @@ def _steady_applies(params):
 
 VARIANTS = {
     "steady": Variant("steady", "constant gain K_inf (an alpha-beta filter): one update per sample, no divider",
-                      (("x1", "x1"), ("v", "v")), _steady_constants, _initial, steady_update, _steady_applies),
+                      lambda params: (("x1", "x1"), ("v", "v"), *start.start_state(params)), _steady_constants,
+                      _initial, steady_update, _steady_applies, start.hardware),
     "full": Variant("full", "time-varying gain: covariance and two restoring dividers per update",
-                    (("x1", "x1"), ("v", "v"), ("p11", "p"), ("p12", "p"), ("p21", "p"), ("p22", "p")),
-                    _full_constants, _full_initial, full_update, settled=_full_settled),
+                    lambda params: (("x1", "x1"), ("v", "v"), ("p11", "p"), ("p12", "p"), ("p21", "p"), ("p22", "p"),
+                                    *start.start_state(params)),
+                    _full_constants, _full_initial, full_update, hardware=start.hardware, settled=_full_settled),
 }
 
 
@@ -197,6 +206,8 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
     noise = ({"x1": min(err["x1"], err["yhat"]), "v": params.T * err["x2"], "vt": params.T * err["x2"], "x2": err["x2"]}
              if err else None)
     formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, noise=noise)
+    if err:  # the rounding the loop feeds back: small gains forget it slowly
+        loop_formats(formats, steady_gain(params), (noise["x1"], noise["v"]))
     # the predicted covariance that feeds the division: its guard bits, and P and S as fine
     pl = formats["pl"]
     frac = covariance_frac(pl)

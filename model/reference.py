@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from kfpga.core.params import matrix, number, vector
+from kfpga.model.start import check_init, measured_start_float
 
 __all__ = [
     "KalmanParams",
@@ -49,6 +50,9 @@ class KalmanParams:
         Initial error covariance, 2x2 symmetric positive definite.
     x0:
         Initial state estimate ``(x1, x2)``.
+    init:
+        ``"state"``: start from ``x0``; ``"measurement"``: x1 from the first sample, x2 from the
+        first two (``model/start.py``).
 
     Raises ``TypeError`` for a value of the wrong type and ``ValueError`` for a wrong value,
     the message starting with the field's name.
@@ -59,9 +63,11 @@ class KalmanParams:
     R: float = 4.0
     P0: tuple = field(default_factory=_default_p0)
     x0: tuple = (0.0, 0.0)
+    init: str = "state"
 
     def __post_init__(self):
         s = object.__setattr__
+        s(self, "init", check_init(self.init))
         s(self, "T", number("T", self.T, minimum=0.0, strict=True))
         s(self, "Q", number("Q", self.Q, minimum=0.0))
         s(self, "R", number("R", self.R, minimum=0.0, strict=True))
@@ -117,7 +123,8 @@ def kalman_matrix(y, params=KalmanParams()):
         # (3) K_k = P_{k|k-1} C^T (C P_{k|k-1} C^T + R)^-1
         gain = p_pred @ c.T @ np.linalg.inv(c @ p_pred @ c.T + params.R)
         # (4) x_k = x_{k|k-1} + K_k (y_k - C x_{k|k-1})
-        x = x_pred + (gain @ (yk - c @ x_pred)).ravel()
+        x_prev, x = x, x_pred + (gain @ (yk - c @ x_pred)).ravel()
+        x = np.array(measured_start_float(params, k, yk, *x_prev, *x))  # init = "measurement"
         # (5) P_k = (I - K_k C) P_{k|k-1}
         p = (eye - gain @ c) @ p_pred
         xs[k], yh[k], ks[k], ps[k] = x, x_pred[0], gain.ravel(), p
@@ -155,8 +162,9 @@ def kalman_decomposed(y, params=KalmanParams()):
         k2 = pl21 / s                                         # K2 = pl21 / S  (paper: pl11 / (pl21 + 4))
         # measurement update
         e = yk - xl1                                          # innovation; yhat = xl1
-        x1 = xl1 + k1 * e                                     # x1 = xl1 + K1 e
+        x1_prev, x1 = x1, xl1 + k1 * e                        # x1 = xl1 + K1 e
         x2 = xl2 + k2 * e                                     # x2 = xl2 + K2 e
+        x1, x2 = measured_start_float(params, k, yk, x1_prev, xl2, x1, x2)  # init = "measurement"
         p11, p12 = pl11 - k1 * pl11, pl12 - k1 * pl12         # p1j = pl1j - K1 pl1j
         p21, p22 = pl21 - k2 * pl11, pl22 - k2 * pl12         # p2j = pl2j - K2 pl1j
         rec["xl1"][..., k], rec["x1"][..., k], rec["x2"][..., k] = xl1, x1, x2
@@ -218,8 +226,7 @@ def steady_state(y, params=KalmanParams(), gain=None):
     for k in range(y.shape[-1]):
         xl1 = x1 + params.T * x2
         e = y[..., k] - xl1
-        x1 = xl1 + k1 * e
-        x2 = x2 + k2 * e
+        x1, x2 = measured_start_float(params, k, y[..., k], x1, x2, xl1 + k1 * e, x2 + k2 * e)  # init = "measurement"
         out["x1"][..., k], out["x2"][..., k], out["yhat"][..., k], out["e"][..., k] = x1, x2, xl1, e
     return out
 

@@ -8,9 +8,13 @@ end's modes). Models::
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-__all__ = ["PBHError", "check_pbh", "dare"]
+from kfpga.core.formats import PRECISION
+
+__all__ = ["PBHError", "check_pbh", "dare", "loop_frac_bits"]
 
 
 class PBHError(ValueError):
@@ -65,3 +69,42 @@ def dare(f, gqg, h, r):
     p = (q + q.T) / 2
     k = p @ h.T @ np.linalg.inv(h @ p @ h.T + r)
     return k, p
+
+
+def _injected(a, v, steps=60):
+    """``sum_k A^k v v^T A^kT``: the steady covariance of a unit injection ``v`` each update into the
+    error loop ``A`` (doubling: 2**steps updates)."""
+    s, m = np.outer(v, v), a.copy()
+    for _ in range(steps):
+        s_next = s + m @ s @ m.T
+        if np.allclose(s_next, s, rtol=1e-12, atol=0):
+            break
+        s, m = s_next, m @ m
+    return s
+
+
+def loop_frac_bits(f, h, gain, floors):
+    """Fraction bits of each state for the rounding the loop feeds back, or ``None`` per state
+    when the loop ``A = (I - K H) F`` is not stable.
+
+    A state's rounding, each update, is carried by the steady error loop ``A`` (slowly forgotten
+    when the gains are small), so it adds the steady covariance of that injection to every
+    state. Each state gets the fraction bits that keep its share of every state's added error
+    within a quarter of the budget (:data:`~kfpga.core.formats.PRECISION`) of the float filter's
+    error floor there (``floors``, one per state). The state is written after the correction, and
+    its prediction (the same format) before it: both injections count.
+    """
+    f, h, gain = np.asarray(f, dtype=float), np.asarray(h, dtype=float), np.asarray(gain, dtype=float)
+    n = f.shape[0]
+    a = (np.eye(n) - gain @ h) @ f
+    if np.max(np.abs(np.linalg.eigvals(a))) >= 1.0:
+        return [None] * n
+    share = math.sqrt((1.0 + PRECISION / 4) ** 2 - 1.0) / math.sqrt(n)
+    out = []
+    for i in range(n):
+        v = np.zeros(n)
+        v[i] = 1.0
+        gain_sq = np.diag(_injected(a, v)) + np.diag(_injected(a, (np.eye(n) - gain @ h) @ v))
+        lsbs = [share * floors[j] * math.sqrt(12.0 / gain_sq[j]) for j in range(n) if gain_sq[j] > 0 and floors[j] > 0]
+        out.append(math.ceil(-math.log2(min(lsbs))) if lsbs else None)
+    return out

@@ -40,6 +40,7 @@ from kfpga.core.fixed import QFormat
 from kfpga.core.formats import MAX_OPERAND_BITS
 from kfpga.core.params import matrix, number
 from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
+from kfpga.model.start import check_init, measured
 
 __all__ = ["RollParams", "PAPER_P0", "transition", "predict", "table1", "synthetic_roll", "MIN_SAMPLES", "SPEC",
            "sqrt_update", "plain_update", "pair_update", "PAIR", "PHASE", "FILTER_STATE", "unit_matrices", "reference",
@@ -71,6 +72,10 @@ class RollParams:
     lsb:
         Degrees per ADC code of the roll sensor, > 0 (the bit-accurate filter and its core work
         in codes; default 0.01 deg, the resolution of the paper's table 1: +-327 deg full scale).
+    init:
+        ``"state"``: each filter of the bit-accurate predictor (and its core) starts from x = 0 and
+        lets its first samples set the state; ``"measurement"``: from its first three samples
+        (angle, rate and acceleration by differences), as the paper does (:func:`start_update`).
     """
 
     T: float = 0.5
@@ -79,8 +84,10 @@ class RollParams:
     s: float = 100.0
     P0: tuple = PAPER_P0
     lsb: float = 0.01
+    init: str = "state"
 
     def __post_init__(self):
+        object.__setattr__(self, "init", check_init(self.init))
         for name in ("T", "q", "R", "s", "lsb"):
             object.__setattr__(self, name, number(name, getattr(self, name), minimum=0.0, strict=True))
         p0 = matrix("P0", self.P0, 3, 3, symmetric=True)
@@ -360,11 +367,57 @@ PHASE = QFormat(2, 0)
 PAIR = ("a", "b")
 
 
-def pair_update(update, names):
-    """The interval predictor's update from one filter's ``update`` over its state ``names``:
-    the filter whose turn it is takes the sample, the other keeps its state."""
+#: The format of a filter's start count (init = "measurement"): 0, 1, 2, then -1.
+START_COUNT = QFormat(3, 0)
+
+
+def start_update(update):
+    """One filter's ``update`` with the paper's start (``init = "measurement"``): its first two
+    samples stored (``m1``, ``m2``; the outputs the sample itself and zero rates); at the third the
+    state from the three by differences, angle ``z``, rate ``z - m2``, acceleration ``z - 2 m2 +
+    m1`` (per filter step), moved one step on (``A x``: the prediction that goes out) with the
+    covariance still the start's; the usual update from the fourth on. Without the start
+    (no ``start`` in the constants) ``update`` itself."""
 
     def step(ops, k, x, u):
+        nxt, outs = update(ops, k, x, u)
+        if "start" not in k:
+            return nxt, outs
+        count = x["start"]
+        running = ops.gt(k["count0"], count)                                          # count = -1
+        second = ops.gt(count, k["count0"])                                           # count >= 1
+        third = ops.gt(count, k["count1"])                                            # count = 2
+        z = ops.rq(u["z"], "x1", "z_start")
+        accel = ops.rq(ops.add(ops.sub(z, ops.shift(x["m2"], 1)), x["m1"]), "x3", "x3_start")  # z - 2 m2 + m1
+        rate = ops.rq(ops.sub(z, x["m2"]), "x2", "x2_start")                          # z - m2
+        started = _predict_state(ops, [z, rate, accel])                                # A x
+        state = {n: ops.select(running, v, x[n]) for n, v in nxt.items()}             # the covariance: the start's
+        for i, v in enumerate(started):
+            name = f"x{i + 1}"
+            state[name] = ops.select(running, nxt[name], ops.select(third, v, x[name]))
+        state["m1"] = ops.select(running, x["m1"], ops.select(second, x["m1"], z))
+        state["m2"] = ops.select(third, x["m2"], ops.select(second, z, x["m2"]))
+        state["start"] = ops.select(running, k["count_done"], ops.select(third, k["count_done"],
+                                                                         ops.select(second, k["count2"], k["count1"])))
+        firsts = {"pred": z, "rate": k["count0"], "accel": k["count0"]}
+        outs = {name: ops.select(running, v, ops.select(third, started[i], firsts[name]))
+                for i, (name, v) in enumerate(outs.items())}
+        return state, outs
+
+    step.__name__ = update.__name__
+    step.__doc__ = update.__doc__
+    return step
+
+
+def pair_update(update, names):
+    """The interval predictor's update from one filter's ``update`` over its state ``names``
+    (and the start's, when the constants have it): the filter whose turn it is takes the sample,
+    the other keeps its state."""
+    update = start_update(update)
+    with_start = (*names, "start", "m1", "m2")
+
+    def step(ops, k, x, u):
+        names = with_start if "start" in k else step.names
         odd = ops.gt(x["phase"], k["zero"])                                           # filter b's turn
         mine = {n: ops.select(odd, x[f"b_{n}"], x[f"a_{n}"]) for n in names}
         nxt, outs = update(ops, k, mine, u)
@@ -374,24 +427,35 @@ def pair_update(update, names):
             state[f"b_{n}"] = ops.select(odd, nxt[n], x[f"b_{n}"])
         return state, outs
 
+    step.names = tuple(names)
     step.__name__ = f"pair_{update.__name__}"
     step.__doc__ = f"The interval predictor's update: {update.__doc__}"
     return step
 
 
 def _paired(state):
-    return (*((f"{f}_{n}", p) for f in PAIR for n, p in state), ("phase", PHASE))
+    """The pair's state from one filter's (with the start's, for ``init = "measurement"``)."""
+
+    def of(params):
+        one = (*state, *((("start", START_COUNT), ("m1", "x1"), ("m2", "x1")) if measured(params) else ()))
+        return (*((f"{f}_{n}", p) for f in PAIR for n, p in one), ("phase", PHASE))
+
+    return of
 
 
 # -- the spec ----------------------------------------------------------------------------------------------
 
-def _phase_constants():
-    return {"zero": Constant(0.0, PHASE, "0"), "one": Constant(1.0, PHASE, "1")}
+def _phase_constants(params):
+    out = {"zero": Constant(0.0, PHASE, "0"), "one": Constant(1.0, PHASE, "1")}
+    if measured(params):
+        out.update({"start": True, **{f"count{v}": Constant(float(v), START_COUNT, str(v)) for v in (0, 1, 2)},
+                    "count_done": Constant(-1.0, START_COUNT, "-1")})
+    return out
 
 
 def _sqrt_constants(params):
     _, q, r, _ = unit_matrices(params)
-    out = {**_phase_constants(), "R": Constant(r, "s", "R"), "sqrt_r": Constant(math.sqrt(r), "rs", "sqrt(R)"),
+    out = {**_phase_constants(params), "R": Constant(r, "s", "R"), "sqrt_r": Constant(math.sqrt(r), "rs", "sqrt(R)"),
            "sqrt_s": Constant(math.sqrt(params.s), "sqs", "sqrt(s)")}
     out.update({f"g{i + 1}": Constant(math.sqrt(q[i, i]), "d", f"sqrt(Q)[{i}]") for i in range(3)})
     return out
@@ -399,7 +463,7 @@ def _sqrt_constants(params):
 
 def _plain_constants(params):
     _, q, r, _ = unit_matrices(params)
-    out = {**_phase_constants(), "R": Constant(r, "ps", "R"), "fade": Constant(params.s, "fade", "s")}
+    out = {**_phase_constants(params), "R": Constant(r, "ps", "R"), "fade": Constant(params.s, "fade", "s")}
     out.update({f"q{i + 1}": Constant(q[i, i], "p", f"Q[{i}]") for i in range(3)})
     return out
 
@@ -407,18 +471,20 @@ def _plain_constants(params):
 _TRI = ((0, 0), (1, 0), (2, 0), (1, 1), (2, 1), (2, 2))
 
 
-def _pair_initial(one):
+def _pair_initial(one, params):
+    if measured(params):
+        one = {**one, "start": 0.0, "m1": 0.0, "m2": 0.0}
     return {**{f"{f}_{n}": v for f in PAIR for n, v in one.items()}, "phase": 0.0}
 
 
 def _sqrt_initial(params):
     d = np.linalg.cholesky(unit_matrices(params)[3])
-    return _pair_initial({"x1": 0.0, "x2": 0.0, "x3": 0.0, **{f"d{i + 1}{j + 1}": float(d[i, j]) for i, j in _TRI}})
+    return _pair_initial({"x1": 0.0, "x2": 0.0, "x3": 0.0, **{f"d{i + 1}{j + 1}": float(d[i, j]) for i, j in _TRI}}, params)
 
 
 def _plain_initial(params):
     p = unit_matrices(params)[3]
-    return _pair_initial({"x1": 0.0, "x2": 0.0, "x3": 0.0, **{f"p{j + 1}{i + 1}": float(p[j, i]) for i, j in _TRI}})
+    return _pair_initial({"x1": 0.0, "x2": 0.0, "x3": 0.0, **{f"p{j + 1}{i + 1}": float(p[j, i]) for i, j in _TRI}}, params)
 
 
 _X_STATE = (("x1", "x1"), ("x2", "x2"), ("x3", "x3"))
@@ -464,7 +530,8 @@ def _points_for(params):
 def reference(params, variant, z):
     """The interval predictor in float, in the filters' own units (codes, filter steps), each
     filter of the pair on its own samples (even, odd) from the start the bit-accurate one has
-    (x = 0, P- = A P0 A^T + Q): ``{"pred", "rate", "accel"}`` along the last axis of ``z``
+    (x = 0, P- = A P0 A^T + Q; or from the first three samples with ``init = "measurement"``):
+    ``{"pred", "rate", "accel"}`` along the last axis of ``z``
     (codes), each sample's the prediction of the filter that took it. Both variants are the
     same filter in real arithmetic; this is the plain form, written independently of the stage
     functions."""
@@ -473,13 +540,18 @@ def reference(params, variant, z):
     out = {name: np.empty(z.shape) for name in ("pred", "rate", "accel")}
     for index in np.ndindex(z.shape[:-1]):
         for parity in (0, 1):
-            _one_filter(a, q, r, p0, params.s, z[index][parity::2], out, index, parity)
+            _one_filter(a, q, r, p0, params.s, z[index][parity::2], out, index, parity, measured(params))
     return out
 
 
-def _one_filter(a, q, r, p0, fade, z, out, index, parity):
+def _one_filter(a, q, r, p0, fade, z, out, index, parity, start=False):
     x, p = np.zeros(3), p0.copy()
     for n, zn in enumerate(z):
+        if start and n < 3:  # init = "measurement": two samples stored, the state from three
+            x = a @ _start(z[:3], 1.0) if n == 2 else np.array([zn, 0.0, 0.0])
+            for name, value in zip(("pred", "rate", "accel"), x, strict=True):
+                out[name][(*index, 2 * n + parity)] = value
+            continue
         gain = p[:, 0] / (p[0, 0] + r)                  # K = P H^T / (H P H^T + R)
         x = x + gain * (zn - x[0])                      # x = x + K (z - H x)
         p = p - np.outer(gain, p[0, :])                 # P = (I - K H) P

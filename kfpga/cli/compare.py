@@ -59,6 +59,10 @@ def _print(config, args, label, m):
     print(f"kfpga compare: {config.filter} filter, {args.variant} variant, {label}, {m['samples']} samples"
           + (f", seed {m['seed']}" if m["seed"] is not None else ""))
     if m["rmse_float"] is not None:
+        startup = m["startup_samples"]
+        print(f"  start-up                   " + (f"{startup} samples (the float error's rolling RMS within 1.5x its "
+                                                 "final RMS)" if startup is not None else
+                                                 "not over in the first half of the run"))
         print(f"  RMSE of {field} vs truth (after {m['settle']} settling samples):")
         if m["rmse_raw"] is not None:
             print(f"    raw input    {m['rmse_raw']:10.4f} codes  ({m['measured_input']})")

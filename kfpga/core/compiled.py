@@ -250,14 +250,14 @@ def compile_stage(update, formats, *, constants, state, inputs, outputs, vector)
     state_names = tuple(name for name, _ in state)
     input_names = tuple(name for name, _ in inputs)
     sites = tuple(ops.sites)
-    _drop_copies(ops.lines)
     args = (["ys"] + [f"s_{n}" for n in state_names] + [f"o_{n}" for n in outputs]
             + [f"ov{i}" for i in range(len(sites))])
-    body = [f"    {line}" for line in ops.lines]
-    body += [f"    o_{name}[n] = {outs[name].raw.expr}" for name in outputs]
+    tail = [f"o_{name}[n] = {outs[name].raw.expr}" for name in outputs]
     if state_names:
-        body.append(f"    {', '.join('s_' + n for n in state_names)}, = "
-                    f"{', '.join(x_next[n].raw.expr for n in state_names)},")
+        tail.append(f"{', '.join('s_' + n for n in state_names)}, = {', '.join(x_next[n].raw.expr for n in state_names)},")
+    lines = ops.lines + tail
+    _drop_copies(lines)  # with the tail: a value the outputs or the next state read is read again
+    body = [f"    {line}" for line in lines]
     if vector:
         head = ["for n in range(len(ys[0])):"] + [f"    u_{name} = ys[{i}][n]" for i, name in enumerate(input_names)]
     elif len(input_names) == 1:

@@ -14,7 +14,7 @@ from kfpga.core.formats import MAX_OPERAND_BITS
 from kfpga.core.plots import pyplot
 
 __all__ = ["sample_count", "rmse", "sqnr_db", "float_run", "Comparison", "compare", "limit_cycles", "sweep",
-           "precision_warnings",
+           "precision_warnings", "startup_samples",
            "plot_compare", "plot_sweep"]
 
 #: The noise-free inputs of the limit-cycle check: (name, level before, level after, step at)
@@ -26,6 +26,28 @@ LIMIT_CYCLE_WINDOW = 2000  # the last samples, after settling
 
 def rmse(estimate, truth):
     return float(np.sqrt(np.mean((np.asarray(estimate, dtype=np.float64) - truth) ** 2)))
+
+
+#: The start-up ends when the float filter's error, as a rolling RMS, first comes within this
+#: factor of its RMS over the second half of the run.
+STARTUP_FACTOR = 1.5
+
+
+def startup_samples(estimate, truth):
+    """The samples the filter's start-up took: the first ``k`` where the RMS of ``estimate -
+    truth`` over a window from ``k`` (a hundredth of the run, at least 10 samples) is within
+    :data:`STARTUP_FACTOR` of its RMS over the second half; ``None`` when it never is in the
+    first half (the run is too short to tell)."""
+    err2 = (np.asarray(estimate, dtype=np.float64) - truth) ** 2
+    n = err2.shape[-1]
+    window = max(10, n // 100)
+    if n < 4 * window:
+        return None
+    steady = float(np.mean(err2[n // 2:]))
+    sums = np.concatenate([[0.0], np.cumsum(err2)])
+    rolling = (sums[window:] - sums[:-window]) / window  # [k]: the mean over k .. k + window - 1
+    inside = np.flatnonzero(rolling[:n // 2] <= STARTUP_FACTOR ** 2 * steady)
+    return int(inside[0]) if inside.size else None
 
 
 def sqnr_db(reference, test):
@@ -64,8 +86,9 @@ def compare(config, variant, y, truth=None, *, settle=None, seed=None, scenario=
     """Run the float and the bit-accurate filter on the same codes ``y`` and measure them.
 
     The RMSE figures are of the filter's main output (its ``default_output``, x1 for the
-    paper's filter) against ``truth`` and skip the first ``settle`` samples (default: 100, or a
-    tenth of short runs), where both filters are still converging; the other figures use every
+    paper's filter) against ``truth`` and skip the first ``settle`` samples, where both filters
+    are still converging (default: the float filter's start-up, :func:`startup_samples`, at
+    least 100 or a tenth of short runs, at most half the run); the other figures use every
     sample. ``fields`` gives the fixed - float difference of every output; ``overflow_points``
     the samples that overflowed at each quantisation point; ``limit_cycle_lsb`` and
     ``dead_band_lsb`` come from :func:`limit_cycles` (skipped with ``limit_cycle=False``).
@@ -76,15 +99,17 @@ def compare(config, variant, y, truth=None, *, settle=None, seed=None, scenario=
     # the raw input that observes the main output, for the "raw" RMSE and the plot
     measured = config.spec.measured_input(config.params)
     raw = (codes.get(measured) if codes is not None else y) if measured is not None else None
-    settle = min(100, n // 10) if settle is None else settle
-    if not 0 <= settle < n:
-        raise ValueError(f"settle must be in [0, {n}), not {settle}")
     model = FixedModel(config, variant=variant)
     res = model.run(y)
     fixed = model.to_float(res)
     flt = float_run(config, variant, y)
     main = config.spec.default_output
     fx1, flx1 = fixed[main], flt[main]
+    startup = startup_samples(flx1, truth) if truth is not None else None
+    if settle is None:  # past the start-up, when it was measured and took more than the default
+        settle = max(min(100, n // 10), min(startup or 0, n // 2))
+    if not 0 <= settle < n:
+        raise ValueError(f"settle must be in [0, {n}), not {settle}")
     lsb = model.output_format(main).lsb
     w = slice(settle, None)
     fields = {}
@@ -102,6 +127,7 @@ def compare(config, variant, y, truth=None, *, settle=None, seed=None, scenario=
         "samples": n,
         "seed": seed,
         "settle": settle,
+        "startup_samples": startup,
         "field": main,
         "measured_input": measured,
         "rmse_raw": rmse(raw[w], truth[w]) if truth is not None and raw is not None else None,

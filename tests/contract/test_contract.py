@@ -19,6 +19,7 @@ samples in the simulations: as many as :data:`CYCLE_BUDGET` cycles take, at leas
 :data:`MIN_SAMPLES`.
 """
 
+import dataclasses
 import os
 
 import numpy as np
@@ -53,6 +54,11 @@ def random_config(spec, variant, rng):
     """Random parameters, and formats near (and sometimes well below) their defaults; valid."""
     for _ in range(200):
         params = spec.random_params(rng)
+        if "init" in {f.name for f in dataclasses.fields(params)} and rng.random() < 0.4:
+            try:  # the start from the first samples (model/start.py), where the model has one
+                params = dataclasses.replace(params, init="measurement")
+            except ValueError:
+                pass
         try:
             base = FilterConfig(filter=spec.name, params=params)
             base.require_variant(variant)
