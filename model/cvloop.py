@@ -29,7 +29,8 @@ from kfpga.model.reference import steady_state_gain
 from kfpga.model.riccati import loop_frac_bits
 
 __all__ = ["POINTS", "LOOP_POINTS", "t_exponent", "steady_gain", "predict", "innovation", "correct", "rate_operand",
-           "rate_product", "rate_write", "rate", "rate_constants", "finish_formats", "steady_goals", "stressed", "measured_start", "loop_formats"]
+           "rate_product", "rate_write", "rate", "rate_constants", "finish_formats", "steady_goals", "stressed", "measured_start",
+           "loop_formats"]
 
 #: The points of the paper's filter; the loop's are :data:`LOOP_POINTS`.
 POINTS = {

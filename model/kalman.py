@@ -40,7 +40,6 @@ from kfpga.core.errors import ConfigError
 from kfpga.core.fixed import QFormat
 from kfpga.core.formats import (
     MAX_OPERAND_BITS,
-    PRECISION,
     constant_frac_bits,
     covariance_frac,
     noise_frac_bits,

@@ -43,6 +43,7 @@ from kfpga.core.errors import ConfigError
 from kfpga.core.fixed import QFormat
 from kfpga.core.formats import covariance_frac, register_formats
 from kfpga.core.spec import Constant, FilterSpec, MutationBlock, Output, Variant
+from kfpga.model import start
 from kfpga.model.cvloop import (
     POINTS,
     correct,
@@ -58,7 +59,6 @@ from kfpga.model.cvloop import (
     stressed,
     t_exponent,
 )
-from kfpga.model import start
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
 from kfpga.model.reference import KalmanParams, kalman_decomposed, steady_error_std, steady_state, steady_state_gain
 

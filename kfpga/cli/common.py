@@ -254,7 +254,8 @@ def add_signal_args(p, *, files=False):
                    help="number of samples (default: 20000, or the whole --input; at most its rows)")
     p.add_argument("--seed", type=seed_type, metavar="S", help="noise seed of a scenario (default: random, printed)")
     p.add_argument("--config", metavar="TOML", help="model parameters and formats (default: built-in, see 'kfpga formats')")
-    p.add_argument("--settle", type=int, metavar="N", help="samples skipped by the RMSE figures (default: the start-up, at least 100)")
+    p.add_argument("--settle", type=int, metavar="N",
+                   help="samples skipped by the RMSE figures (default: the start-up, at least 100)")
 
 
 def add_design_args(p, channels_help):

@@ -60,7 +60,7 @@ def _print(config, args, label, m):
           + (f", seed {m['seed']}" if m["seed"] is not None else ""))
     if m["rmse_float"] is not None:
         startup = m["startup_samples"]
-        print(f"  start-up                   " + (f"{startup} samples (the float error's rolling RMS within 1.5x its "
+        print("  start-up                   " + (f"{startup} samples (the float error's rolling RMS within 1.5x its "
                                                  "final RMS)" if startup is not None else
                                                  "not over in the first half of the run"))
         print(f"  RMSE of {field} vs truth (after {m['settle']} settling samples):")

@@ -19,6 +19,7 @@ samples in the simulations: as many as :data:`CYCLE_BUDGET` cycles take, at leas
 :data:`MIN_SAMPLES`.
 """
 
+import contextlib
 import dataclasses
 import os
 
@@ -55,10 +56,8 @@ def random_config(spec, variant, rng):
     for _ in range(200):
         params = spec.random_params(rng)
         if "init" in {f.name for f in dataclasses.fields(params)} and rng.random() < 0.4:
-            try:  # the start from the first samples (model/start.py), where the model has one
+            with contextlib.suppress(ValueError):  # the start from the first samples, where the model has one
                 params = dataclasses.replace(params, init="measurement")
-            except ValueError:
-                pass
         try:
             base = FilterConfig(filter=spec.name, params=params)
             base.require_variant(variant)
