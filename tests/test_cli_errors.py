@@ -111,7 +111,7 @@ CASES = [
     ("filter-name", ["formats", "--filter", "nope"], {},
      "--filter: no filter named 'nope'; registered: " + REGISTERED),
     ("config-unknown-key", ["compare", "--config", "k.toml"], {"k.toml": "[model]\nP1 = 3\n"},
-     "k.toml: unknown key model.P1; the kalman2 filter has: T, Q, R, P0, x0"),
+     "k.toml: unknown key model.P1; the kalman2 filter has: T, Q, R, P0, x0, init"),
     ("simulate-channel-six", ["simulate", "--channels", "6", "--channel", "A1"], {},
      "--channel does not apply with --channels 6: all six channels are sampled and filtered"),
     ("simulate-samples-vs-input", ["simulate", "--input", "in.csv", "--samples", "50"], {"in.csv": GOOD_CSV},
