@@ -122,7 +122,7 @@ def test_steady_variant_needs_q():
 
 
 def test_unknown_keys_are_rejected():
-    with pytest.raises(ConfigError, match=exactly("config: unknown key model.P1; the kalman2 filter has: T, Q, R, P0, x0")):
+    with pytest.raises(ConfigError, match=exactly("config: unknown key model.P1; the kalman2 filter has: T, Q, R, P0, x0, init")):
         KalmanConfig.from_dict({"model": {"P1": 3}})
     with pytest.raises(ConfigError, match=exactly(
             "formats.x3: unknown quantisation point; known: x1, xl1, v, x2, e, gain, p, pl, s, inv_t, vt")):
