@@ -86,15 +86,16 @@ def write_lint_waivers(out_dir, file_glob):
 
 
 def write_top(out_dir, config, *, variant=None, six_channel=False, channel=None, ratio=10, timeout_periods=40,
-              out_field=None, prefilter=None, architecture=None, stages=None):
+              out_field=None, prefilter=None, architecture=None, stages=None, sensors=1):
     """Write ``kfpga_top.v`` (and the lint waivers) into ``out_dir``; returns ``(verilog path, top)``.
     ``prefilter``: the config of a filter between the controller and the core, or ``None``;
-    ``architecture``: the core's (default: the parallel one where it runs)."""
+    ``architecture``: the core's (default: the parallel one where it runs); ``sensors``: more than
+    one on a multiplexer in front of the ADC (:class:`~kfpga.hw.top.FilterSystem`)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     top = FilterSystem(config, variant=variant, six_channel=six_channel, channel=channel, ratio=ratio,
                        timeout_periods=timeout_periods, out_field=out_field, prefilter=prefilter,
-                       architecture=architecture, stages=stages)
+                       architecture=architecture, stages=stages, sensors=sensors)
     path = out_dir / f"{TOP_NAME}.v"
     path.write_text(to_verilog(top, TOP_NAME))
     write_lint_waivers(out_dir, f"*{TOP_NAME}.v")

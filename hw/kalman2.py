@@ -17,6 +17,7 @@ from __future__ import annotations
 from amaranth import Cat, Module, Mux, Signal, signed
 
 from kfpga.core.ads8364 import CODE_FORMAT
+from kfpga.core.board import MAX_SENSORS
 from kfpga.core.ops import Fx, divider_shift, quotient_bits
 from kfpga.hw.arith import NO_OVERFLOW, any_flag, live_flags
 from kfpga.hw.core import Core, write_estimate
@@ -33,6 +34,8 @@ class SteadyCore(ConstantGainLoop):
     """The paper's steady-state (constant-gain) core: the constant-velocity loop
     (:class:`~kfpga.hw.cvloop.ConstantGainLoop`) with the gains ``K1`` and ``T*K2``; see there for
     the pipeline and the stream contract."""
+
+    max_channels = MAX_SENSORS  # past eight, the states in block memory (LoopPipeline)
 
 
 class FullCore(Core):

@@ -28,6 +28,7 @@ from functools import reduce
 from amaranth import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib.memory import Memory
 
+from kfpga.core.board import MAX_SENSORS
 from kfpga.core.fixed import Rounding
 from kfpga.core.ops import Fx
 from kfpga.core.program import OPS, ROUNDINGS, build_program, handshake_twin
@@ -82,7 +83,7 @@ class SequentialCore(Core):
     variant:
         The variant whose update the core runs.
     channels:
-        Independent channel states (1..8).
+        Independent channel states (1..256), each a block of the register file.
 
     Members
     -------
@@ -93,6 +94,8 @@ class SequentialCore(Core):
     overflow : Out(1)
         Sticky: some write saturated (or wrapped) since reset.
     """
+
+    max_channels = MAX_SENSORS  # every channel's state a block of the register file
 
     def __init__(self, config, variant, *, channels=1, program=None):
         super().__init__(config, variant, channels)

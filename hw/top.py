@@ -11,7 +11,7 @@ from kfpga.core import registry
 from kfpga.hw.ads8364 import CONV0, ADS8364Controller, SampleLayout
 from kfpga.hw.clockdiv import ClockDivider
 
-__all__ = ["FilterSystem", "AdcFrontend", "PORTS", "ADC_PINS", "out_field", "prefilters", "prefilter_core"]
+__all__ = ["FilterSystem", "AdcFrontend", "PORTS", "ADC_PINS", "out_field", "prefilters", "prefilter_core", "port_widths"]
 
 #: Top-level ports: name -> (direction, width, description). The pin table and the .sdc use it.
 PORTS = {
@@ -38,10 +38,28 @@ PORTS = {
 }
 
 
-def _pin_members(names, out_width=None):
+#: The multiplexer's select, a port of a design with sensors taking turns on one ADC channel.
+MUX_PORT = ("out", None, "select of the analog multiplexer in front of the ADC: the sensor converted next")
+
+
+def port_widths(sensors=1):
+    """``{port: (direction, width, description)}`` of the top for ``sensors`` (more than one: the
+    ``mux_sel`` port, and ``out_channel`` as wide as a sensor's number); ``out_data``'s width is
+    the output format's (``None`` here)."""
+    from kfpga.core.board import sensor_bits
+
+    ports = dict(PORTS)
+    if sensors > 1:
+        bits = sensor_bits(sensors)
+        ports["out_channel"] = ("out", max(3, bits), "sensor (channel state) of out_data")
+        ports["mux_sel"] = (MUX_PORT[0], bits, MUX_PORT[2])
+    return ports
+
+
+def _pin_members(names, out_width=None, ports=PORTS):
     members = {}
     for name in names:
-        direction, bits, _ = PORTS[name]
+        direction, bits, _ = ports[name]
         shape = signed(out_width) if name == "out_data" else bits
         init = 1 if name in ("rst_n", "adc_eoc_n") else 0
         members[name] = In(shape, init=init) if direction == "in" else Out(shape)
@@ -170,6 +188,23 @@ def out_width(config, name=None):
     return config.output_format(out_field(config, name)).width
 
 
+def check_sensors(sensors, config, *, six_channel=False, prefilter=None):
+    """``sensors`` checked for a design with this config (``ValueError`` naming the problem)."""
+    from kfpga.core.board import MAX_SENSORS
+
+    if not isinstance(sensors, int) or isinstance(sensors, bool) or not 1 <= sensors <= MAX_SENSORS:
+        raise ValueError(f"sensors must be an integer 1..{MAX_SENSORS}, not {sensors!r}")
+    if sensors > 1:
+        if six_channel:
+            raise ValueError("sensors on a multiplexer take one ADC channel: not with six channels")
+        if len(config.inputs) != 1:
+            raise ValueError(f"sensors on a multiplexer need a one-input filter; this model reads {len(config.inputs)} "
+                             "ADC channels per update")
+        if prefilter is not None:
+            raise ValueError("a pre-filter keeps a state per ADC channel: not with sensors on a multiplexer")
+    return sensors
+
+
 class FilterSystem(wiring.Component):
     """The whole FPGA design for one ADS8364: :class:`AdcFrontend` + a filter core + output port.
 
@@ -201,6 +236,14 @@ class FilterSystem(wiring.Component):
         the core: every ADC channel read has its own state, the core gets each sample as many
         samples late as the pre-filter delays it. Its formats must be ones that cannot overflow
         (the defaults).
+    sensors:
+        More than one (up to 256): that many sensors take turns on ADC channel ``channel``
+        through an analog multiplexer whose select is the ``mux_sel`` port. Sensor ``s`` is the
+        core's channel state ``s`` (block memory past eight, on a core that holds them there): the
+        select names the sensor converted next; it moves on, and ``s + 1`` after ``N - 1`` wraps
+        to 0, when the core takes a sample, so the multiplexer settles from then to the next
+        conversion's HOLD (a conversion timer, ``[board] sample_rate_hz``, gives it the rest of the
+        period). Each sensor is sampled at the board's rate, the ADC at ``sensors`` times that.
 
     Members
     -------
@@ -208,8 +251,9 @@ class FilterSystem(wiring.Component):
     """
 
     def __init__(self, config, *, variant=None, six_channel=False, channel=None, ratio=10, timeout_periods=40,
-                 out_field=None, prefilter=None, architecture=None, stages=None):
+                 out_field=None, prefilter=None, architecture=None, stages=None, sensors=1):
         spec = config.spec
+        self.sensors = check_sensors(sensors, config, six_channel=six_channel, prefilter=prefilter)
         self.six_channel = bool(six_channel)
         if self.six_channel:
             if len(config.inputs) != 1:
@@ -232,14 +276,15 @@ class FilterSystem(wiring.Component):
                                                                        else 1)
         # several inputs: all six are converted at one instant and read; the update takes its own
         channels = 6 if six_channel or len(self.adc) > 1 else 1
-        config.board.check(channels, ratio)
+        config.board.check(channels, ratio, self.sensors)
         self.frontend = AdcFrontend(six_channel=six_channel or len(self.adc) > 1, channel=self.channel, ratio=ratio,
-                                    timeout_periods=timeout_periods, period=config.board.period_cycles())
+                                    timeout_periods=timeout_periods, period=config.board.period_cycles(self.sensors))
         options = {} if stages is None else {"stages": stages}
-        self.core = spec.make_core(config, self.variant, channels=6 if six_channel else 1, architecture=architecture,
-                                   **options)
+        self.core = spec.make_core(config, self.variant, channels=6 if six_channel else self.sensors,
+                                   architecture=architecture, **options)
         self.architecture = architecture or spec.architectures(self.variant, config.params)[0]
-        super().__init__(_pin_members(PORTS, out_width(config, self.out_field)))
+        self.ports = port_widths(self.sensors)
+        super().__init__(_pin_members(self.ports, out_width(config, self.out_field), self.ports))
 
     def elaborate(self, platform):
         m = Module()
@@ -295,12 +340,18 @@ class FilterSystem(wiring.Component):
             ]
         if self.six_channel:  # the ADC's channel number is the core's channel state
             m.d.comb += core.i.payload.channel.eq(source.channel)
+        sensor = None
+        if self.sensors > 1:  # the sensor the multiplexer selects is the core's channel state
+            sensor = Signal(range(self.sensors), name="sensor")
+            with m.If(core.i.valid & core.i.ready):
+                m.d.sync += sensor.eq(Mux(sensor == self.sensors - 1, 0, sensor + 1))
+            m.d.comb += [core.i.payload.channel.eq(sensor), self.mux_sel.eq(sensor)]
         # the output port has no backpressure: each estimate is presented for one cycle
         m.d.comb += [
             core.o.ready.eq(1),
             self.out_valid.eq(core.o.valid),
             self.out_data.eq(getattr(core.o.payload, self.out_field)),
-            self.out_channel.eq(core.o.payload.channel if self.six_channel else self.channel),
+            self.out_channel.eq(core.o.payload.channel if self.six_channel or sensor is not None else self.channel),
             self.out_overflow.eq(core.overflow if self.prefilter is None else core.overflow | self.prefilter.overflow),
             self.out_timeout.eq(frontend.timeout),
         ]

@@ -36,12 +36,14 @@ __all__ = ["TimingViolation", "ADS8364", "Read"]
 
 
 class Read(NamedTuple):
-    """One read of the parallel port: when, which channel, the code, the conversion it came from."""
+    """One read of the parallel port: when, which channel, the code, the conversion it came from,
+    and the design's multiplexer select at that conversion's HOLD (0 without a multiplexer)."""
 
     time_ns: float
     channel: int
     code: int
     conversion: int
+    sel: int = 0
 
 #: Data hold after RD rises (ns): not given in the pages seen; sibling parts hold >= 5 ns.
 DATA_HOLD_NS = 5.0

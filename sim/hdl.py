@@ -95,11 +95,18 @@ def model_instance(indent="    "):
 {indent});"""
 
 
-def dut_instance(top, out_width, indent="    "):
-    """The generated top level on wires of the same names."""
+def dut_instance(top, out_width, indent="    ", sensors=1):
+    """The generated top level on wires of the same names (with ``mux_sel`` and a wider
+    ``out_channel`` for ``sensors`` on a multiplexer; ``mux_sel`` reads 0 without one)."""
+    from kfpga.hw.top import port_widths
+
+    ports = port_widths(sensors)
+    sel = f"{indent}wire [{ports['mux_sel'][1] - 1}:0] mux_sel;\n" if sensors > 1 else f"{indent}wire [0:0] mux_sel = 1'b0;\n"
     return f"""{indent}wire adc_clk, adc_hold_a_n, adc_hold_b_n, adc_hold_c_n, adc_eoc_n, adc_cs_n, adc_rd_n, adc_wr_n;
 {indent}wire adc_byte, adc_add, adc_reset_n, out_valid, out_overflow, out_timeout;
-{indent}wire [2:0] adc_addr, out_channel;
+{indent}wire [2:0] adc_addr;
+{indent}wire [{ports['out_channel'][1] - 1}:0] out_channel;
+{sel}
 {indent}wire [15:0] adc_data;
 {indent}wire signed [{out_width - 1}:0] out_data;
 {indent}{top} dut (
@@ -107,7 +114,8 @@ def dut_instance(top, out_width, indent="    "):
 {indent}    .adc_hold_b_n(adc_hold_b_n), .adc_hold_c_n(adc_hold_c_n), .adc_eoc_n(adc_eoc_n), .adc_cs_n(adc_cs_n),
 {indent}    .adc_rd_n(adc_rd_n), .adc_wr_n(adc_wr_n), .adc_byte(adc_byte), .adc_add(adc_add),
 {indent}    .adc_reset_n(adc_reset_n), .adc_addr(adc_addr), .adc_data(adc_data), .out_data(out_data),
-{indent}    .out_channel(out_channel), .out_valid(out_valid), .out_overflow(out_overflow), .out_timeout(out_timeout)
+{indent}    .out_channel(out_channel), .out_valid(out_valid), .out_overflow(out_overflow), .out_timeout(out_timeout)""" + (
+        ", .mux_sel(mux_sel)" if sensors > 1 else "") + f"""
 {indent});
 {indent}wire [95:0] next_codes;
 {indent}wire take, read_strobe;
@@ -122,7 +130,7 @@ def dut_instance(top, out_width, indent="    "):
 STATUS = {0: "done", 1: "an ADS8364 timing violation", 2: "the ADC ran out of codes", 3: "the cycle limit"}
 
 
-def cosim_wrapper(top, out_width):
+def cosim_wrapper(top, out_width, sensors=1):
     """``kfpga_cosim``: the design and the ADC model with file I/O, for the fast regressions
     (:mod:`kfpga.sim.system`); its only port is the system clock.
 
@@ -140,7 +148,7 @@ module {COSIM_NAME} (
 );
     wire clk50 = clk;
     reg rst_n = 1'b0;
-{dut_instance(top, out_width)}
+{dut_instance(top, out_width, sensors=sensors)}
 {model_instance()}
 
     // codes.hex: one conversion per line, six 16-bit codes in hex (channel 0 first)
@@ -151,6 +159,7 @@ module {COSIM_NAME} (
     reg [63:0] want, max_cycles, step, cycle = 0, n_out = 0, n_reads = 0;
     reg exhausted = 1'b0;
     reg signed [63:0] out_value, read_value, read_origin;
+    reg [63:0] sel_at_hold = 0;
     assign next_codes = codes_q;
     initial begin
         if (!$value$plusargs("samples=%d", want)) want = 1000;
@@ -189,15 +198,17 @@ module {COSIM_NAME} (
         cycle <= cycle + 1;
         if (cycle == 3) rst_n <= 1'b1;
         if (take) begin
+            sel_at_hold <= mux_sel;  // the sensor the multiplexer gives this conversion
             got = $fscanf(fc, "%h %h %h %h %h %h\\n", c0, c1, c2, c3, c4, c5);
             if (got != 6) exhausted <= 1'b1;
             codes_q <= {{c5, c4, c3, c2, c1, c0}};
         end
-        // reads.txt: time (ns) channel code conversion; outputs.txt: time channel value sticky-overflow
+        // reads.txt: time (ns) channel code conversion mux_sel-at-its-HOLD; outputs.txt: time channel
+        // value sticky-overflow
         if (read_strobe) begin
             read_value = $signed(read_code);
             read_origin = $signed(read_conversion);
-            $fwrite(fr, "%0d %0d %0d %0d\\n", $time, read_channel, read_value, read_origin);
+            $fwrite(fr, "%0d %0d %0d %0d %0d\\n", $time, read_channel, read_value, read_origin, sel_at_hold);
             n_reads <= n_reads + 1;
         end
         if (out_valid) begin

@@ -6,6 +6,7 @@ import numpy as np
 
 from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
 from kfpga.core.csvio import read_header, read_samples
+from kfpga.core.errors import InputError
 from kfpga.model import scenarios
 from kfpga.model.reference import KalmanParams
 from kfpga.model.scenarios import stress_codes, threshold_codes
@@ -51,23 +52,54 @@ class Source:
         return np.array(cols).T
 
 
-def scenario_source(name, n, seed, params=None, *, glitches=None, config=None, adc=None):
+def scenario_source(name, n, seed, params=None, *, glitches=None, config=None, adc=None, sensors=1):
     """Six channels of scenario ``name``: independent noise, channel c phase-shifted by c/6 turn.
 
     The phase shift keeps the channels distinguishable, so a channel mix-up cannot go unseen.
     A ``config`` whose filter has scenarios of its own (``FilterSpec.scenario``) gets six runs of
     them, seeded apart; with several inputs the first run's observations go on the ADC
-    channels ``adc`` (one per input) and its truth with them.
+    channels ``adc`` (one per input) and its truth with them. With ``sensors`` on a multiplexer
+    in front of ADC channel ``adc[0]``, each sensor its own run (:func:`sensor_source`).
     """
+    if sensors > 1:
+        count = -(-n // sensors)
+        codes, truths = _runs(name, count, seed, config, params, sensors)
+        return sensor_source(codes, truths, adc[0] if adc else 0, name=f"{name} (seed {seed}), {sensors} sensors")
     if config is not None and config.spec.scenario is not None:
         return _spec_source(name, n, seed, config, adc, glitches)
+    codes, truths = _runs(name, n, seed, config, params, 6)
+    return Source(codes, truth=truths, glitches=glitches, name=f"{name} (seed {seed})")
+
+
+def _runs(name, n, seed, config, params, count):
+    """``(codes, truths)``, each ``(count, n)``: ``count`` runs of scenario ``name`` of one input,
+    the filter's own scenarios seeded apart, or the generic ones as one run, each row shifted by
+    337 samples (distinct waveforms from one seeded run)."""
+    if config is not None and config.spec.scenario is not None:
+        codes, truths = np.zeros((count, n), dtype=np.int64), np.zeros((count, n))
+        for c in range(count):
+            truth, y = config.spec.scenario(name, n, seed + 1009 * c, config.params)
+            scenarios.check_rails(name, y)
+            codes[c], truths[c] = (next(iter(y.values())) if isinstance(y, dict) else y), truth
+        return codes, truths
     params = KalmanParams() if params is None else params
-    truth, y = scenarios.make(name, n + 6 * 337, seed, params, batch=(6,))
+    truth, y = scenarios.make(name, n + count * 337, seed, params, batch=(count,))
     scenarios.check_rails(name, y)
-    # shift channel c by c * 337 samples: distinct waveforms from one seeded run
-    shifted = np.stack([y[c, c * 337: c * 337 + n] for c in range(6)])
-    truths = np.stack([truth[c, c * 337: c * 337 + n] for c in range(6)])
-    return Source(shifted, truth=truths, glitches=glitches, name=f"{name} (seed {seed})")
+    return (np.stack([y[c, c * 337: c * 337 + n] for c in range(count)]),
+            np.stack([truth[c, c * 337: c * 337 + n] for c in range(count)]))
+
+
+def sensor_source(codes, truths, channel, *, name):
+    """The source of ``len(codes)`` sensors taking turns on ADC channel ``channel`` through a
+    multiplexer, from reset: conversion ``j`` converts sensor ``j % N``'s sample ``j // N``.
+    Its truth is ``(N, conversions)``, row ``s`` sensor s's truth at each conversion (read where
+    the conversion is sensor s's)."""
+    count, n = codes.shape
+    order = np.arange(count * n)
+    column = np.zeros((6, count * n), dtype=np.int64)
+    column[channel] = codes[order % count, order // count]
+    truth = None if truths is None else np.repeat(np.asarray(truths, dtype=np.float64), count, axis=1)
+    return Source(column, truth=truth, name=name)
 
 
 def _spec_source(name, n, seed, config, adc, glitches):
@@ -86,10 +118,19 @@ def _spec_source(name, n, seed, config, adc, glitches):
     return Source(codes, truth=truths, glitches=glitches, name=f"{name} (seed {seed})")
 
 
-def csv_source(path, *, clip=False, config=None, adc=None):
+def csv_source(path, *, clip=False, config=None, adc=None, sensors=1):
     """Replay a CSV: columns ``y0``..``y5`` if present, else the ``y`` column on all six. A
     ``config`` with several inputs reads their columns (the observation names) onto the ADC
-    channels ``adc``, one per input."""
+    channels ``adc``, one per input. ``sensors`` on a multiplexer read columns ``y0`` ..
+    ``y<N-1>``, one row a sample of each (:func:`sensor_source`)."""
+    if sensors > 1:
+        header = read_header(path)
+        missing = [f"y{s}" for s in range(sensors) if f"y{s}" not in header]
+        if missing:
+            raise InputError(f"{path}: {sensors} sensors on a multiplexer replay columns y0..y{sensors - 1}, one per "
+                             f"sensor; the header lacks {', '.join(missing[:4])}{' ...' if len(missing) > 4 else ''}")
+        codes = np.stack([read_samples(path, clip=clip, column=f"y{s}").y for s in range(sensors)])
+        return sensor_source(codes, None, adc[0] if adc else 0, name=f"csv {path}, {sensors} sensors")
     if config is not None and len(config.inputs) > 1:
         samples = read_samples(path, clip=clip, columns=config.inputs)
         codes = np.zeros((6, len(samples)), dtype=np.int64)

@@ -40,7 +40,7 @@ from kfpga.sim.scoreboard import Scoreboard
 from kfpga.sim.sources import csv_source, scenario_source
 
 __all__ = ["make_source", "Update", "updates_of", "conversions_for", "SystemRecords", "SystemBuild", "build", "run",
-           "SystemRunFailed"]
+           "SystemRunFailed", "cycles_allowed"]
 
 #: Codes from the truth beyond which an estimate counts as hit by a glitch, when no pre-filter
 #: states its own bound: far beyond the scenarios' noise, far below a full-scale glitch.
@@ -79,12 +79,13 @@ def make_source(params, count):
 
         codes = np.stack([stress_codes(params["seed"] + 101 * c, max(count, 64)) for c in range(6)])
         return Source(codes, glitches=glitches, name=f"stress (seed {params['seed']})")
+    sensors = params.get("sensors") or 1
     if params.get("csv"):
-        source = csv_source(params["csv"], clip=params.get("clip", False), config=config, adc=adc)
+        source = csv_source(params["csv"], clip=params.get("clip", False), config=config, adc=adc, sensors=sensors)
         source.glitches = glitches
         return source
     return scenario_source(params.get("scenario") or config.spec.scenarios[0], count, params["seed"], config.params,
-                           glitches=glitches, config=config, adc=adc)
+                           glitches=glitches, config=config, adc=adc, sensors=sensors)
 
 
 def conversions_for(params, samples):
@@ -114,10 +115,13 @@ class Update(NamedTuple):
     conversion: int
 
 
-def updates_of(reads, config, adc):
-    """The updates the ADC reads make: one per read for a one-input filter; for several inputs
-    one per conversion, of the reads of the inputs' channels ``adc``, when the last of them is
-    read (the hardware's order). Its channel is the first input's ADC channel."""
+def updates_of(reads, config, adc, sensors=1):
+    """The updates the ADC reads make: one per read for a one-input filter (its channel the ADC
+    channel, or with ``sensors`` on a multiplexer the select at the conversion's HOLD); for
+    several inputs one per conversion, of the reads of the inputs' channels ``adc``, when the last
+    of them is read (the hardware's order). Its channel is the first input's ADC channel."""
+    if sensors > 1:
+        return [Update(r.time_ns, r.sel, r.code, r.conversion) for r in reads]
     if len(config.inputs) == 1:
         return [Update(r.time_ns, r.channel, r.code, r.conversion) for r in reads]
     out, pending, conversion = [], {}, None
@@ -161,6 +165,7 @@ class SystemRecords:
         self.six = bool(params.get("six"))
         self.field = params.get("out_field") or self.config.spec.default_output
         self.adc_channels = list(params.get("adc") or [params.get("channel") or 0])
+        self.sensors = params.get("sensors") or 1
         self.source = make_source(params, expected_conversions)
         self.outputs = []  # (time_ns, channel, out_data, sticky overflow flag)
         self.resets = []  # times rst_n fell
@@ -170,8 +175,20 @@ class SystemRecords:
         cached = getattr(self, "_updates", None)
         if cached is None or cached[0] is not self.adc.reads or cached[1] != len(self.adc.reads):
             self._updates = (self.adc.reads, len(self.adc.reads), updates_of(self.adc.reads, self.config,
-                                                                              self.adc_channels))
+                                                                              self.adc_channels, self.sensors))
         return self._updates[2]
+
+    def mux_errors(self):
+        """Reads whose multiplexer select at the HOLD was not the sensor whose turn it was (the
+        reads since reset, counted modulo the sensors)."""
+        bounds = [*self.resets, float("inf")]
+        errors, k, index = 0, 0, 0
+        for read in self.adc.reads:
+            while read.time_ns >= bounds[k]:
+                k, index = k + 1, 0
+            errors += read.sel != index % self.sensors
+            index += 1
+        return errors
 
     def _error_vs_float(self):
         """The hardware's output field against the float filter (and the truth) on the same samples."""
@@ -266,6 +283,9 @@ class SystemRecords:
                 sb.add_output(channel=ch, sticky=sticky, **{self.field: value})
                 j += 1
         result = sb.check(pending_allowed=pending_allowed)
+        if self.sensors > 1:  # the select takes each sensor in turn from reset: read k is sensor k mod N
+            result["mux_errors"] = self.mux_errors()
+            result["ok"] = result["ok"] and result["mux_errors"] == 0
         if not self.resets:
             result.update(self._error_vs_float())
             result.update(self.glitch_figures())
@@ -306,6 +326,7 @@ class SystemBuild:
     prefilter: FilterConfig | None = None
     architecture: str | None = None
     stages: int | None = None
+    sensors: int = 1
 
     @property
     def core_options(self):
@@ -313,7 +334,7 @@ class SystemBuild:
 
 
 def write_sources(out_dir, config, *, variant, six=False, channel=None, prefilter=None, architecture=None,
-                  stages=None):
+                  stages=None, sensors=1):
     """The generated top, the ADC model and ``kfpga_cosim`` (and its clock top) in ``out_dir``."""
     from kfpga.hw.generate import TOP_NAME, write_top
     from kfpga.hw.top import out_width
@@ -321,9 +342,10 @@ def write_sources(out_dir, config, *, variant, six=False, channel=None, prefilte
 
     out_dir = Path(out_dir)
     _, top = write_top(out_dir, config, variant=variant, six_channel=six, channel=channel, prefilter=prefilter,
-                       architecture=architecture, stages=stages)
+                       architecture=architecture, stages=stages, sensors=sensors)
     hdl.write_model(out_dir)
-    (out_dir / f"{hdl.COSIM_NAME}.v").write_text(hdl.cosim_wrapper(TOP_NAME, out_width(config, top.out_field)))
+    (out_dir / f"{hdl.COSIM_NAME}.v").write_text(hdl.cosim_wrapper(TOP_NAME, out_width(config, top.out_field),
+                                                                   sensors))
     (out_dir / f"{hdl.COSIM_NAME}_clock.v").write_text(hdl.clock_top(hdl.COSIM_NAME))
     return sorted(out_dir.glob("*.v"))
 
@@ -383,10 +405,11 @@ def compile_cached(simulator, tag, write, top, *, root=DEFAULT_ROOT):
 
 
 def build(simulator, *, config=None, variant=None, six=False, channel=None, prefilter=None, architecture=None,
-          stages=None, root=DEFAULT_ROOT):
+          stages=None, sensors=1, root=DEFAULT_ROOT):
     """Generate and compile ``kfpga_cosim`` for ``simulator`` (cached by content under
     ``build/sim/<simulator>/system-<hash>``); returns a :class:`SystemBuild`. ``prefilter``: the
-    config of a filter between the controller and the core; ``architecture``: the core's."""
+    config of a filter between the controller and the core; ``architecture``: the core's;
+    ``sensors``: more than one on a multiplexer in front of the ADC."""
     from kfpga.sim import hdl
 
     config = FilterConfig() if config is None else config
@@ -394,10 +417,10 @@ def build(simulator, *, config=None, variant=None, six=False, channel=None, pref
     build_dir, command = compile_cached(
         simulator, "system", lambda folder: write_sources(folder, config, variant=variant, six=six, channel=channel,
                                                           prefilter=prefilter, architecture=architecture,
-                                                          stages=stages),
+                                                          stages=stages, sensors=sensors),
         hdl.COSIM_NAME, root=root)
     return SystemBuild(simulator, build_dir, command, config, variant, bool(six), channel, prefilter, architecture,
-                       stages)
+                       stages, sensors)
 
 
 class _Records(SystemRecords):
@@ -415,7 +438,7 @@ def run(built, *, params, samples, on_progress=None, tag=None, timeout_s=None):
     """
     from kfpga.sim import hdl
 
-    params = {**params, "variant": built.variant, "six": built.six, "samples": samples}
+    params = {**params, "variant": built.variant, "six": built.six, "samples": samples, "sensors": built.sensors}
     if "config_toml" not in params:
         params["config_toml"] = built.config.to_toml()
     if built.prefilter is not None:
@@ -465,13 +488,13 @@ def run(built, *, params, samples, on_progress=None, tag=None, timeout_s=None):
                   else f"{conversions} conversions written" if status == 2
                   else f"{max_cycles} cycles, {n_out} of {samples} estimates out")
         raise SystemRunFailed(f"{built.simulator}: the run stopped at {time_ns} ns on {why}: {detail}")
-    reads = hdl.read_log(run_dir / "reads.txt", 4)
+    reads = hdl.read_log(run_dir / "reads.txt", 5)
     outputs = hdl.read_log(run_dir / "outputs.txt", 4)
     if len(reads) != n_reads or len(outputs) != n_out:
         raise SystemRunFailed(f"{built.simulator}: the logs hold {len(reads)} reads and {len(outputs)} estimates, the "
                               f"counters {n_reads} and {n_out}")
-    records.adc = _AdcCounts([Read(float(t), ch, code, conv) for t, ch, code, conv in reads.tolist()], conv_done,
-                             eoc_pulses)
+    records.adc = _AdcCounts([Read(float(t), ch, code, conv, sel) for t, ch, code, conv, sel in reads.tolist()],
+                             conv_done, eoc_pulses)
     records.outputs = [(float(t), ch, v, sticky) for t, ch, v, sticky in outputs.tolist()]
     report = records.report(sim_wall, timeout_flag=timeout, overflow_flag=overflow, sim_time_us=time_ns / 1000.0)
     report.update({"simulator": built.simulator, "cycles": cycles, "reads": n_reads, "eoc_pulses": eoc_pulses,
@@ -481,17 +504,22 @@ def run(built, *, params, samples, on_progress=None, tag=None, timeout_s=None):
 
 
 def cycle_budget(built, records, samples):
-    """System cycles a run may take before it is stopped: generous, as a conversion with one
-    read takes 230 system cycles, six reads 380 (for six estimates); a core slower than that
-    (the sequential core: hundreds of cycles an update) paces the reads, and gets twice its own;
-    a conversion timer adds its period to each conversion."""
+    """System cycles a run of ``built`` may take before it is stopped (:func:`cycles_allowed`)."""
+    return cycles_allowed(built.config, built.variant, samples, six=built.six, sensors=built.sensors,
+                          reads=len(records.adc_channels), core_options=built.core_options)
+
+
+def cycles_allowed(config, variant, samples, *, six=False, sensors=1, reads=1, core_options=None):
+    """System cycles a run of ``samples`` estimates may take before it is stopped: generous, as a
+    conversion with one read takes 230 system cycles, six reads 380 (for six estimates); a core
+    slower than that (the sequential core: hundreds of cycles an update) paces the reads, and gets
+    twice its own; a conversion timer adds its period to each conversion."""
     from kfpga.hw.generate import figures_only
 
-    base = 600 if len(records.adc_channels) > 1 or built.six else 300
-    core = figures_only(built.config.spec.make_core(built.config, built.variant, channels=6 if built.six else 1,
-                                                    **built.core_options))
-    estimates = 6 if built.six else 1  # per conversion
-    period = built.config.board.period_cycles() or 0  # the conversion timer's
+    base = 600 if reads > 1 or six else 300
+    core = figures_only(config.spec.make_core(config, variant, channels=6 if six else sensors, **(core_options or {})))
+    estimates = 6 if six else 1  # per conversion
+    period = config.board.period_cycles(sensors) or 0  # the conversion timer's
     per_conversion = max(base, estimates * (2 * core.cycles_per_update + 60)) + period
     return per_conversion * -(-samples // estimates) + 20000
 

@@ -262,7 +262,10 @@ def add_design_args(p, channels_help):
     """--filter, --variant, --channels, --config, --architecture, --prefilter: the arguments of the
     commands that build hardware."""
     add_filter_args(p)
-    p.add_argument("--channels", type=int, choices=(1, 6), default=1, help=channels_help)
+    p.add_argument("--channels", type=channels_type, default=1, metavar="N",
+                   help=channels_help + "; any other N up to 256: N sensors taking turns on one ADC channel "
+                        "(--channel) through an analog multiplexer, its select on the mux_sel pins, each sensor its "
+                        "own channel state")
     p.add_argument("--config", metavar="TOML", help="model parameters, formats and [board] rate")
     p.add_argument("--architecture", choices=("auto", "parallel", "sequential"), default="auto",
                    help="the core: parallel (the update over pipeline stages), sequential (one operation at a time), "
@@ -272,6 +275,41 @@ def add_design_args(p, channels_help):
                    help="with --architecture parallel: the register stages of the filter's loop (default: the "
                         "core's; 'kfpga explore' lists what each gives)")
     add_prefilter_args(p)
+
+
+def channels_type(text):
+    """``--channels``: 1 (one ADC channel), 6 (the six) or 2..256 sensors on a multiplexer."""
+    from kfpga.core.board import MAX_SENSORS
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer 1..{MAX_SENSORS}, not {text!r}") from None
+    if not 1 <= value <= MAX_SENSORS:
+        raise argparse.ArgumentTypeError(f"must be an integer 1..{MAX_SENSORS}, not {value}")
+    return value
+
+
+def sensors(args):
+    """Sensors on a multiplexer in front of one ADC channel: ``--channels`` other than 1 and 6, else 1."""
+    return args.channels if args.channels not in (1, 6) else 1
+
+
+def check_sensors(args, pre=None):
+    """Refuse what does not go with sensors on a multiplexer (``--channels`` other than 1 and 6)."""
+    if sensors(args) > 1 and pre is not None:
+        not_with("--prefilter", f"--channels {args.channels}",
+                 "a pre-filter keeps a state per ADC channel, not per sensor on a multiplexer")
+
+
+def check_rate(args, config):
+    """The board's sample rate against what the ADS8364 converts for ``--channels`` (at
+    ``--ratio`` where the command has it): one line, exit 2, when it cannot."""
+    channels = 6 if args.channels == 6 or len(config.inputs) > 1 else 1
+    try:
+        config.board.check(channels, getattr(args, "ratio", 10), sensors(args))
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
 
 
 def need_hz(config, channels):
@@ -496,6 +534,9 @@ def check_channel(args, config=None):
     if config is None:
         return
     spec = config.spec
+    if sensors(args) > 1 and len(config.inputs) > 1:
+        raise UsageError(f"--channels {args.channels}: sensors on a multiplexer take turns on one ADC channel; this "
+                         f"model reads {len(config.inputs)} ADC channels per update ({', '.join(config.inputs)})")
     if args.channels == 6:
         if len(config.inputs) > 1:
             raise UsageError(f"--channels 6 filters six channels of one input each; this model reads {len(config.inputs)} "
@@ -517,7 +558,8 @@ def add_adc_source_args(p):
     p.add_argument("--seed", type=seed_type, metavar="S", help="noise seed of the ADC inputs (default: random, printed)")
     p.add_argument("--scenario", metavar="NAME", help="ADC input signal: sine, random-accel, model, or the filter's "
                                                       "own ('kfpga filters'; default: its first)")
-    p.add_argument("--input", metavar="CSV", help="replay a CSV on the ADC inputs: y0..y5, or y on all six")
+    p.add_argument("--input", metavar="CSV", help="replay a CSV on the ADC inputs: y0..y5, or y on all six (sensors on "
+                                                  "a multiplexer: y0..y<N-1>, a row a sample of each)")
 
 
 def adc_source_params(args, config):
@@ -531,10 +573,12 @@ def adc_source_params(args, config):
             not_with("--seed", "--input", "the ADC replays the file, no noise is drawn")
         if args.scenario is not None:
             not_with("--scenario", "--input", "the ADC replays the file")
-        rows = csv_source(args.input, clip=False).codes.shape[1]  # fail early, with the file and line
+        n = sensors(args)
+        # fail early, with the file and line
+        rows = csv_source(args.input, clip=False, sensors=n).codes.shape[1] // n
+        limit = rows * (6 if args.channels == 6 else n)
         if args.samples is None:
-            args.samples = rows if args.channels != 6 else 6 * rows
-        limit = rows * (6 if args.channels == 6 else 1)
+            args.samples = limit
         if args.samples > limit:
             raise UsageError(f"--samples {args.samples} is more than the {limit} estimates the {rows} rows of "
                              f"{args.input} give")

@@ -15,6 +15,8 @@ def add_parser(sub):
                                    ".qpf, .qsf (device, sources, pins from the pin table), .sdc, manifest.json, "
                                    "README.txt, and the Verilator lint waivers.")
     common.add_design_args(p, "1: filter one ADC channel; 6: sample all six with one HOLD and filter each (default: 1)")
+    p.epilog = ("example: kfpga generate --config tracker.toml --out build/tracker; "
+                "kfpga generate --filter alphabeta --channels 64 --out build/tracks (64 sensors on a multiplexer)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
     p.add_argument("--channel", type=common.adc_channel, metavar="CH",
                    help="the channel of --channels 1: 0..5 or A0, A1, B0, B1, C0, C1 (default: A0)")
@@ -46,34 +48,34 @@ def run(args):
     except ValueError as exc:
         raise UsageError(f"--out-field: {exc}") from None
     pre = common.prefilter(args)
-    _check_board(config, args)
-    _check_pins(config, field, args.pins, args.ratio)  # every refusal before the design search prints anything
+    sensors = common.sensors(args)
+    common.check_sensors(args, pre)
+    common.check_rate(args, config)
+    _check_pins(config, field, args.pins, args.ratio, sensors)  # every refusal before the design search prints anything
     architecture = common.architecture(args, config, args.channels)
     timing = _timing(args, config, architecture)
     manifest = write_project(args.out, config, variant=args.variant, six_channel=args.channels == 6,
                              channel=args.channel, ratio=args.ratio, pins=args.pins, out_field=field, prefilter=pre,
-                             architecture=architecture, stages=args.stages, timing=timing)
+                             architecture=architecture, stages=args.stages, timing=timing, sensors=sensors)
     _print(args, config, field, manifest, pre)
     if not args.no_lint:
         _lint(args.out)
     return 0
 
 
-def _check_pins(config, field, pins, ratio):
+def _check_pins(config, field, pins, ratio, sensors=1):
     """The pin table and the ADC clock, refused before the design search prints anything."""
-    from kfpga.flows.quartus import board_rows, check_pins, io_timing
+    from kfpga.flows.quartus import PinError, board_rows, check_pins, io_timing
 
-    rows, label = board_rows(config, field, pins)
-    check_pins(rows, config, label, field)
-    io_timing(ratio)  # refuses an ADC clock the ADS8364 cannot take
-
-
-def _check_board(config, args):
-    channels = 6 if args.channels == 6 or len(config.inputs) > 1 else 1
+    rows, label = board_rows(config, field, pins, sensors)
     try:
-        config.board.check(channels, args.ratio)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
+        check_pins(rows, config, label, field, sensors)
+    except PinError as exc:
+        if sensors > 1 and pins is None:  # the built-in table ran out of spare pins
+            raise PinError(f"{exc}; 'kfpga pins --channels {sensors} --write my_pins.csv' writes a table to complete "
+                           "with your board's free pins (--pins my_pins.csv)") from None
+        raise
+    io_timing(ratio, sensors)  # refuses an ADC clock the ADS8364 cannot take
 
 
 def _timing(args, config, architecture):
@@ -111,6 +113,8 @@ def _print(args, config, field, manifest, pre):
     print(f"wrote {args.out}/: {', '.join(manifest['files'])}")
     where = "six channels" if args.channels == 6 else ", ".join(
         f"{CHANNELS[c]}" + (f" ({n})" if len(args.adc) > 1 else "") for n, c in zip(config.inputs, args.adc, strict=True))
+    if manifest.get("sensors"):
+        where += f", {manifest['sensors']} sensors on a multiplexer (mux_sel)"
     core = manifest["core"]
     rate = manifest["sample_rate_hz"]
     print(f"  {config.filter} filter, {args.variant} variant on the {core['architecture']} core, ADC {where}"

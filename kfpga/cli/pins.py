@@ -19,6 +19,9 @@ def add_parser(sub):
     p.add_argument("--out-field", metavar="FIELD", help=common.out_field_help())
     p.add_argument("--pins", metavar="CSV", help="the table to start from (default: constraints/pins.csv)")
     p.add_argument("--write", metavar="CSV", help="write the table to this file instead of printing it")
+    p.add_argument("--channels", type=common.channels_type, default=1, metavar="N",
+                   help="as generate's: N other than 1 and 6 adds the multiplexer's select (mux_sel) and widens "
+                        "out_channel (default: 1)")
     p.set_defaults(func=run)
 
 
@@ -34,7 +37,7 @@ def run(args):
         field = out_field(config, args.out_field)
     except ValueError as exc:
         raise UsageError(f"--out-field: {exc}") from None
-    text = pin_table(config, out_field=field, base=args.pins)
+    text = pin_table(config, out_field=field, base=args.pins, sensors=common.sensors(args))
     if not args.write:
         print(text, end="")
         return 0

@@ -46,9 +46,9 @@ def _synthesise(args, config):
         bar.update()
         top_v, top = write_top(Path(tmp) / "top", config, variant=args.variant, six_channel=args.channels == 6,
                                prefilter=common.prefilter(args), architecture=args.architecture_chosen,
-                               stages=args.stages)
+                               stages=args.stages, sensors=common.sensors(args))
         bar.set_postfix_str("whole design")
-        results["whole_design"] = estimate(top_v, "kfpga_top", timing=io_timing())
+        results["whole_design"] = estimate(top_v, "kfpga_top", timing=io_timing(sensors=common.sensors(args)))
         bar.update()
         if args.ecp5:
             for key, path, name in (("core", core_v, core_v.stem), ("whole_design", top_v, "kfpga_top")):
@@ -75,6 +75,7 @@ def run(args):
     from kfpga.hw.resources import EP2C20
 
     config = common.load_config(args, hardware=True)
+    common.check_sensors(args, common.prefilter(args))
     args.architecture_chosen = common.architecture(args, config, args.channels)
     results, top = _synthesise(args, config)
     goals, met = _goals(config, args, results)

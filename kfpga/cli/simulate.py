@@ -47,6 +47,12 @@ def _check(args, config, pre):
         raise UsageError("--waves needs --adc-model python: the waveforms come from the cocotb bench")
     if pre is not None and python_adc:
         raise UsageError("--prefilter runs with --adc-model verilog (the fast regression), not with the cocotb bench")
+    if common.sensors(args) > 1:
+        if python_adc:
+            common.not_with("--adc-model python", f"--channels {args.channels}",
+                            "the cocotb bench has no multiplexer in front of its ADC; the Verilog model's run has")
+        if args.glitches is not None:
+            common.not_with("--glitches", f"--channels {args.channels}", "the glitches are counted per ADC channel")
     if args.glitches is not None:
         if args.glitches < 1:
             raise UsageError(f"--glitches must be a positive integer, not {args.glitches}")
@@ -73,7 +79,7 @@ def _simulate(args, config, pre, params):
                       waves=args.waves, **design)
     else:
         built = system.build(args.simulator, config=config, variant=args.variant, six=six, channel=args.channel,
-                             prefilter=pre, **design)
+                             prefilter=pre, sensors=common.sensors(args), **design)
     build_s = time.perf_counter() - t0
     bar = tqdm(total=args.samples, desc="co-simulation", unit="sample", file=sys.stderr, disable=args.quiet)
 
@@ -119,6 +125,8 @@ def run(args):
     config = common.load_config(args, hardware=True)
     common.check_channel(args, config)
     pre = common.prefilter(args)
+    common.check_sensors(args, pre)
+    common.check_rate(args, config)
     _check(args, config, pre)
     common.check_architecture(args, config)
     params = common.adc_source_params(args, config)
@@ -136,7 +144,9 @@ def run(args):
         "samples": result["compared"], "mismatches": result["mismatches"], "simulator": args.simulator,
         "variant": args.variant, "architecture": args.architecture_chosen, "stages": args.stages,
         "channels": args.channels, "seed": args.seed, "adc_model": args.adc_model,
-        "sample_rate_hz": config.board.actual_rate_hz(),
+        "sample_rate_hz": config.board.actual_rate_hz(common.sensors(args)),
+        "sensors": common.sensors(args) if common.sensors(args) > 1 else None,
+        "mux_errors": result.get("mux_errors"),
         "wall_s": wall, "build_s": build_s,
         "samples_per_s": result["compared"] / wall if wall else None,
         **{k: result.get(k) for k in ("max_abs_hw_minus_float", "max_abs_hw_minus_float_lsb", "sqnr_db", "rmse_raw",
@@ -152,7 +162,7 @@ def run(args):
         common.emit_json(summary)
     else:
         _print(args, config, pre, summary)
-    return 0 if summary["mismatches"] == 0 else 1
+    return 0 if summary["mismatches"] == 0 and not summary["mux_errors"] else 1
 
 
 def _sim_time(us):
@@ -163,6 +173,8 @@ def _print(args, config, pre, summary):
     from kfpga.core.ads8364 import CHANNELS
 
     where = "all six channels" if args.channels == 6 else (
+        f"{summary['sensors']} sensors on a multiplexer in front of channel {CHANNELS[args.adc[0]]}"
+        if summary["sensors"] else
         f"channel {CHANNELS[args.adc[0]]}" if len(args.adc) == 1 else
         "channels " + ", ".join(f"{CHANNELS[c]} ({n})" for n, c in zip(config.inputs, args.adc, strict=True)))
     rate = summary["sample_rate_hz"]
@@ -170,6 +182,9 @@ def _print(args, config, pre, summary):
           f"{where}" + (f" at {rate:g} Hz" if rate else "") + f", {args.simulator}, seed {args.seed}")
     verdict = "bit-exact" if summary["mismatches"] == 0 else "MISMATCHES"
     print(f"  estimates compared      {summary['samples']}   mismatches {summary['mismatches']} ({verdict})")
+    if summary["sensors"]:
+        print(f"  multiplexer select      {summary['mux_errors']} conversion(s) of a sensor out of turn (mux_sel at "
+              "the HOLD against the sensor whose estimate the core made)")
     if summary["max_abs_hw_minus_float"] is not None:
         print(f"  hardware vs float       max |hw - float| {summary['max_abs_hw_minus_float_lsb']:.1f} LSB "
               f"({summary['max_abs_hw_minus_float']:.4g} codes), SQNR {summary['sqnr_db']:.1f} dB")

@@ -41,13 +41,15 @@ def run(args):
         if not ok:
             raise UsageError(f"--run-icarus: {why}")
     pre = common.prefilter(args)
+    common.check_sensors(args, pre)
+    common.check_rate(args, config)
     common.check_architecture(args, config)
     params = common.adc_source_params(args, config)
     architecture = common.architecture(args, config, args.channels)
     common.info(f"writing the testbench of {args.samples} estimates into {out} ...")
     info = write_testbench(out, config, variant=args.variant, six=args.channels == 6, channel=args.channel,
                            samples=args.samples, params=params, prefilter=pre, architecture=architecture,
-                           stages=args.stages)
+                           stages=args.stages, sensors=common.sensors(args))
     result = {**info, "out": str(out)}
     if args.run_icarus:
         common.info("running it on Icarus ...")

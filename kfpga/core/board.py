@@ -6,7 +6,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-__all__ = ["SYSTEM_MHZ", "SYSTEM_PERIOD_NS", "WORST_PATH_GOAL_NS", "Board", "CONVERSION_PERIODS"]
+__all__ = ["SYSTEM_MHZ", "SYSTEM_PERIOD_NS", "WORST_PATH_GOAL_NS", "Board", "CONVERSION_PERIODS", "MAX_SENSORS",
+           "sensor_bits"]
 
 #: The 50 MHz oscillator of the paper's board (seeds/001, section 4.1): the one clock domain.
 SYSTEM_MHZ = 50.0
@@ -23,6 +24,14 @@ WORST_PATH_GOAL_NS = round(1000.0 / (1.25 * SYSTEM_MHZ), 2)
 #: channel every 230 system cycles (SPEC §6, measured on the controller).
 CONVERSION_PERIODS = {1: 23, 6: 38}
 
+#: Sensors an analog multiplexer in front of one ADC channel may feed (the core's channel states).
+MAX_SENSORS = 256
+
+
+def sensor_bits(sensors):
+    """Bits of the multiplexer's select and of a sensor's number: enough for ``sensors``."""
+    return max(1, (sensors - 1).bit_length())
+
 
 @dataclass(frozen=True, kw_only=True)
 class Board:
@@ -31,9 +40,10 @@ class Board:
     Parameters
     ----------
     sample_rate_hz:
-        Conversions a second on every channel: the top starts one every ``clock_hz /
-        sample_rate_hz`` system cycles (the nearest whole number). ``None``: the ADC converts as
-        fast as it can (one channel every 230 cycles at 50 MHz).
+        Samples a second of every channel (every sensor, with a multiplexer in front of the ADC):
+        the top starts a conversion every ``clock_hz / (sample_rate_hz * sensors)`` system cycles
+        (the nearest whole number). ``None``: the ADC converts as fast as it can (one channel
+        every 230 cycles at 50 MHz).
     clock_hz:
         The system clock (default: the board's 50 MHz oscillator).
     """
@@ -50,25 +60,29 @@ class Board:
                 raise ValueError(f"board.{name} must be a positive number of Hz, not {value!r}")
             object.__setattr__(self, name, float(value))
 
-    def period_cycles(self):
-        """System cycles between conversions (``None``: free running)."""
+    def period_cycles(self, sensors=1):
+        """System cycles between conversions (``None``: free running); ``sensors`` take turns on
+        one ADC channel, each at the sample rate."""
         if self.sample_rate_hz is None:
             return None
-        return max(1, round(self.clock_hz / self.sample_rate_hz))
+        return max(1, round(self.clock_hz / (self.sample_rate_hz * sensors)))
 
-    def actual_rate_hz(self):
-        """The rate the whole-number period gives."""
-        cycles = self.period_cycles()
-        return None if cycles is None else self.clock_hz / cycles
+    def actual_rate_hz(self, sensors=1):
+        """The rate of each channel (each sensor) the whole-number period gives."""
+        cycles = self.period_cycles(sensors)
+        return None if cycles is None else self.clock_hz / (cycles * sensors)
 
-    def max_rate_hz(self, channels, ratio=10):
-        """The fastest the ADS8364 converts ``channels`` (1 or 6) at this clock and ADC clock ratio."""
-        return self.clock_hz / (ratio * CONVERSION_PERIODS[6 if channels > 1 else 1])
+    def max_rate_hz(self, channels, ratio=10, sensors=1):
+        """The fastest the ADS8364 samples each of ``channels`` (1 or 6) at this clock and ADC clock
+        ratio, or each of ``sensors`` taking turns on one channel."""
+        return self.clock_hz / (ratio * CONVERSION_PERIODS[6 if channels > 1 else 1] * sensors)
 
-    def check(self, channels, ratio=10):
+    def check(self, channels, ratio=10, sensors=1):
         """Refuse a rate the ADC cannot reach with ``channels`` (``ValueError`` naming the limit)."""
-        limit = self.max_rate_hz(channels, ratio)
-        if self.sample_rate_hz is not None and self.actual_rate_hz() > limit:
+        limit = self.max_rate_hz(channels, ratio, sensors)
+        if self.sample_rate_hz is not None and self.actual_rate_hz(sensors) > limit * (1 + 1e-9):
+            what = (f"{sensors} sensors taking turns on one channel" if sensors > 1 else
+                    "six channels" if channels > 1 else "one channel")
             raise ValueError(f"board.sample_rate_hz = {self.sample_rate_hz:g} is more than the ADS8364 converts "
-                             f"{'six channels' if channels > 1 else 'one channel'} at a {self.clock_hz / ratio / 1e6:g} "
-                             f"MHz ADC clock: at most {limit:.6g} Hz")
+                             f"{what} at a {self.clock_hz / ratio / 1e6:g} MHz ADC clock: at most {limit:.6g} Hz"
+                             + (" each" if sensors > 1 else ""))

@@ -115,7 +115,10 @@ def _designs(config, variant, channels):
             out.append((architecture, None, figures_only(spec.make_core(config, variant, channels=channels,
                                                                         architecture=architecture))))
             continue
-        default = figures_only(spec.make_core(config, variant, channels=channels, architecture=architecture))
+        try:
+            default = figures_only(spec.make_core(config, variant, channels=channels, architecture=architecture))
+        except ValueError:
+            continue  # the parallel core does not hold this many channel states
         if not hasattr(default, "stages"):
             out.append((architecture, None, default))  # its figures read; built again when estimated
             continue

@@ -19,7 +19,7 @@ from kfpga.core.errors import InputError, PinError
 from kfpga.core.paths import read_text
 from kfpga.core.spec import Constant
 from kfpga.hw.generate import TOP_NAME, write_top
-from kfpga.hw.top import PORTS, out_width
+from kfpga.hw.top import PORTS, out_width, port_widths
 from kfpga.hw.top import out_field as top_out_field
 
 __all__ = ["FAMILY", "DEVICE", "DEVICE_ORDERING", "PinError", "PinRow", "load_pins", "port_bits", "check_pins", "io_timing",
@@ -104,36 +104,42 @@ SPARE_OUT_PINS = (200, 232, 222, 230, 192, 237, 216, 236, 184, 195)
 BUILTIN_OUT_BITS = 26
 
 
-def board_rows(config, out_field=None, pins=None):
+def board_rows(config, out_field=None, pins=None, sensors=1):
     """``(rows, label)`` of the pin table for this design: the file ``pins`` as it is, or the
     built-in table with ``out_data`` fitted to the field's width (rows beyond it dropped,
-    :data:`SPARE_OUT_PINS` for bits past :data:`BUILTIN_OUT_BITS`)."""
+    :data:`SPARE_OUT_PINS` for bits past :data:`BUILTIN_OUT_BITS`), and for sensors on a
+    multiplexer the spare pins left for the bits of ``out_channel`` past 3 and for ``mux_sel``
+    (bits past the spare pins have no row: :func:`check_pins` names them)."""
     if pins is not None:
         return load_pins(pins), str(pins)
     width = out_width(config, out_field)
     rows = [r for r in load_pins() if r.port != "out_data" or r.bit < width]
     spare = list(SPARE_OUT_PINS)
-    for bit in range(BUILTIN_OUT_BITS, min(width, BUILTIN_OUT_BITS + len(spare))):
-        rows.append(PinRow("out_data", bit, f"PIN_{spare[bit - BUILTIN_OUT_BITS]}", "3.3-V LVTTL",
-                           "spare user I/O of the built-in table", 0))
+    extra = [("out_data", bit) for bit in range(BUILTIN_OUT_BITS, width)]
+    ports = port_widths(sensors)
+    extra += [("out_channel", bit) for bit in range(PORTS["out_channel"][1], ports["out_channel"][1])]
+    extra += [("mux_sel", bit) for bit in range(ports["mux_sel"][1])] if "mux_sel" in ports else []
+    for (port, bit), pin in zip(extra, spare, strict=False):  # the bits past the spare pins have no row
+        rows.append(PinRow(port, bit, f"PIN_{pin}", "3.3-V LVTTL", "spare user I/O of the built-in table", 0))
     return rows, "constraints/pins.csv"
 
 
-def port_bits(config, out_field=None):
+def port_bits(config, out_field=None, sensors=1):
     """Every top-level port bit as ``(port, bit)`` (``bit`` None for 1-bit ports).
 
-    ``out_data`` is as wide as the format of the output field on it (``out_field``).
+    ``out_data`` is as wide as the format of the output field on it (``out_field``); ``sensors``
+    on a multiplexer add ``mux_sel`` and widen ``out_channel`` (:func:`~kfpga.hw.top.port_widths`).
     """
     bits = []
-    for name, (_, width, _) in PORTS.items():
+    for name, (_, width, _) in port_widths(sensors).items():
         width = out_width(config, out_field) if name == "out_data" else width
         bits += [(name, None)] if width == 1 else [(name, b) for b in range(width)]
     return bits
 
 
-def check_pins(rows, config, label="pin table", out_field=None):
+def check_pins(rows, config, label="pin table", out_field=None, sensors=1):
     """Map each port bit to its row; every bit exactly one pin, every pin used once."""
-    wanted = set(port_bits(config, out_field))
+    wanted = set(port_bits(config, out_field, sensors))
     by_bit, by_pin = {}, {}
     for row in rows:
         key = (row.port, row.bit)
@@ -147,14 +153,15 @@ def check_pins(rows, config, label="pin table", out_field=None):
         if row.pin in by_pin:
             raise PinError(f"{label}: line {row.line}: {row.pin} is already used by {by_pin[row.pin].target}")
         by_bit[key], by_pin[row.pin] = row, row
-    missing = [f"{p}[{b}]" if b is not None else p for p, b in port_bits(config, out_field) if (p, b) not in by_bit]
+    missing = [f"{p}[{b}]" if b is not None else p for p, b in port_bits(config, out_field, sensors)
+               if (p, b) not in by_bit]
     if missing:
         raise PinError(f"{label}: no pin for {', '.join(missing[:8])}{' ...' if len(missing) > 8 else ''} "
                        f"({len(missing)} port bit(s)); add rows for them")
     return by_bit
 
 
-def pin_table(config, *, out_field=None, base=None):
+def pin_table(config, *, out_field=None, base=None, sensors=1):
     """The text of a pin table for this config: the rows of ``base`` (default: the built-in table)
     for every port bit the design has, and rows with an empty pin for bits it lacks.
 
@@ -162,7 +169,7 @@ def pin_table(config, *, out_field=None, base=None):
     does not have (their pins are the user's to choose, as only the board says which are free),
     a narrower one drops rows.
     """
-    rows, _ = board_rows(config, out_field, base)
+    rows, _ = board_rows(config, out_field, base, sensors)
     by_bit = {(r.port, r.bit): r for r in rows}
     lines = [
         f"# Pin table of {TOP_NAME} on the {DEVICE_ORDERING} for the {config.filter} filter, out_data = "
@@ -171,7 +178,7 @@ def pin_table(config, *, out_field=None, base=None):
         "# still needs one of the board's free user I/O pins; kfpga generate refuses the table until it has one.",
         "port,bit,pin,io_standard,note",
     ]
-    for port, bit in port_bits(config, out_field):
+    for port, bit in port_bits(config, out_field, sensors):
         row = by_bit.get((port, bit))
         if row is None:
             lines.append(f"{port},{'' if bit is None else bit},,3.3-V LVTTL,choose a free user I/O pin")
@@ -200,11 +207,18 @@ def _sdc_values(ratio):
     }
 
 
-def io_timing(ratio=10):
+def _port_groups(ports):
+    """``(control, outputs)``: the ADC's control outputs (timed against its clock) and the design's
+    outputs (the output port and the multiplexer's select, timed as the output port)."""
+    control = [n for n in ports if n.startswith("adc_") and ports[n][0] == "out" and n != "adc_clk"]
+    outputs = [n for n in ports if n.startswith("out_") or n == "mux_sel"]
+    return control, outputs
+
+
+def io_timing(ratio=10, sensors=1):
     """The .sdc's I/O constraints as :func:`kfpga.hw.timing.analyse` takes them."""
     values = _sdc_values(ratio)
-    control = [n for n in PORTS if n.startswith("adc_") and PORTS[n][0] == "out" and n != "adc_clk"]
-    outputs = [n for n in PORTS if n.startswith("out_")]
+    control, outputs = _port_groups(port_widths(sensors))
     return {
         "period_ns": SYSTEM_PERIOD_NS,
         "input_delays": {"adc_data": float(values["data_in_max"])},
@@ -215,26 +229,27 @@ def io_timing(ratio=10):
 
 
 def write_project(out_dir, config, *, variant=None, six_channel=False, channel=None, ratio=10, pins=None,
-                  out_field=None, prefilter=None, architecture=None, stages=None, timing=None):
+                  out_field=None, prefilter=None, architecture=None, stages=None, timing=None, sensors=1):
     """Write the Verilog and a complete Quartus II project into ``out_dir``; returns the manifest.
     ``prefilter``: the config of a filter between the controller and the core, or ``None``;
     ``architecture``, ``stages``: the core's (default: the parallel one where it runs); ``timing``:
-    what the design's estimate says of the clock, recorded in the manifest."""
+    what the design's estimate says of the clock, recorded in the manifest; ``sensors``: more
+    than one on a multiplexer in front of the ADC."""
     out_dir = Path(out_dir)
     variant = config.spec.default_variant if variant is None else variant
     out_field = top_out_field(config, out_field)
-    rows, label = board_rows(config, out_field, pins)
-    assigned = check_pins(rows, config, label, out_field)
+    rows, label = board_rows(config, out_field, pins, sensors)
+    assigned = check_pins(rows, config, label, out_field, sensors)
     values = _sdc_values(ratio)
     verilog, top = write_top(out_dir, config, variant=variant, six_channel=six_channel, channel=channel, ratio=ratio,
-                             out_field=out_field, prefilter=prefilter, architecture=architecture, stages=stages)
+                             out_field=out_field, prefilter=prefilter, architecture=architecture, stages=stages,
+                             sensors=sensors)
     data_bits = out_width(config, out_field)
-
-    control = [n for n in PORTS if n.startswith("adc_") and PORTS[n][0] == "out" and n != "adc_clk"]
-    outputs = [n for n in PORTS if n.startswith("out_")]
+    ports = port_widths(sensors)
+    control, outputs = _port_groups(ports)
 
     def port_list(names):
-        return " ".join(f"{n}[*]" if (PORTS[n][1] or data_bits) != 1 else n for n in names)
+        return " ".join(f"{n}[*]" if (ports[n][1] or data_bits) != 1 else n for n in names)
 
     sdc = Template(_constraint_file("kfpga_top.sdc.in").read_text()).substitute(
         top=TOP_NAME, version=__version__, control_ports=port_list(control), output_ports=port_list(outputs),
@@ -242,7 +257,7 @@ def write_project(out_dir, config, *, variant=None, six_channel=False, channel=N
     (out_dir / f"{TOP_NAME}.sdc").write_text(sdc)
 
     pin_lines = []
-    for _, row in sorted(assigned.items(), key=lambda kv: (list(PORTS).index(kv[0][0]), kv[0][1] or 0)):
+    for _, row in sorted(assigned.items(), key=lambda kv: (list(ports).index(kv[0][0]), kv[0][1] or 0)):
         pin_lines.append(f"set_location_assignment {row.pin} -to {row.target}")
         pin_lines.append(f'set_instance_assignment -name IO_STANDARD "{row.io_standard}" -to {row.target}')
     qsf = Template(_constraint_file("kfpga_top.qsf.in").read_text()).substitute(
@@ -256,7 +271,8 @@ def write_project(out_dir, config, *, variant=None, six_channel=False, channel=N
     manifest = {
         "generator": {"kfpga": __version__, "amaranth": importlib.metadata.version("amaranth")},
         "top": TOP_NAME, "family": FAMILY, "device": DEVICE, "device_ordering_code": DEVICE_ORDERING,
-        "filter": config.filter, "variant": variant, "channels": 6 if six_channel else 1,
+        "filter": config.filter, "variant": variant, "channels": 6 if six_channel else sensors,
+        "sensors": sensors if sensors > 1 else None,
         "channel": None if six_channel else CHANNELS[top.channel],
         "adc_channels": None if six_channel else {name: CHANNELS[c] for name, c in zip(config.inputs, top.adc,
                                                                                       strict=True)},
@@ -268,8 +284,8 @@ def write_project(out_dir, config, *, variant=None, six_channel=False, channel=N
                            "overflow": f.overflow.value} for name, f in config.formats.items()},
         "core": {"architecture": top.architecture, "stages": getattr(core, "stages", None),
                  "latency_cycles": core.latency, "cycles_per_update": core.cycles_per_update},
-        "sample_rate_hz": config.board.actual_rate_hz(),
-        "conversion_period_cycles": config.board.period_cycles(),
+        "sample_rate_hz": config.board.actual_rate_hz(sensors),
+        "conversion_period_cycles": config.board.period_cycles(sensors),
         "timing": timing,
         "prefilter": None if prefilter is None else {
             "filter": prefilter.filter, "model": _jsonable(dataclasses.asdict(prefilter.params)),
@@ -277,8 +293,9 @@ def write_project(out_dir, config, *, variant=None, six_channel=False, channel=N
             "channels": top.prefilter.channels},
         "controller": {"states": 22, "timeout_clk_periods": top.frontend.controller.timeout_periods},
         "ports": [{"name": n, "direction": d, "width": data_bits if n == "out_data" else w,
-                   "pins": [assigned[(n, b)].pin for p, b in port_bits(config, out_field) if p == n], "description": desc}
-                  for n, (d, w, desc) in PORTS.items()],
+                   "pins": [assigned[(n, b)].pin for p, b in port_bits(config, out_field, sensors) if p == n],
+                   "description": desc}
+                  for n, (d, w, desc) in ports.items()],
         "files": sorted([verilog.name, f"{TOP_NAME}.qsf", f"{TOP_NAME}.sdc", f"{TOP_NAME}.qpf", "manifest.json",
                          "README.txt", "verilator_lint.vlt"]),
     }
@@ -301,11 +318,15 @@ def _jsonable(value):
 
 def _readme(variant, six_channel, ratio, manifest):
     adc = manifest["adc_channels"]
+    sensors = manifest.get("sensors")
     where = "all six channels" if six_channel else (
+        f"{sensors} sensors taking turns on channel {manifest['channel']} through an analog multiplexer (its select "
+        f"on mux_sel, the sensor of each estimate on out_channel)" if sensors else
         f"channel {manifest['channel']}" if len(adc) == 1 else
         "channels " + ", ".join(f"{c} ({name})" for name, c in adc.items()) + ", one update per conversion")
     out = manifest["out_data"]
-    rate = (f"a conversion every {manifest['conversion_period_cycles']} system cycles ({manifest['sample_rate_hz']:g} Hz)"
+    rate = (f"a conversion every {manifest['conversion_period_cycles']} system cycles ({manifest['sample_rate_hz']:g} Hz"
+            + (" each" if sensors else "") + ")"
             if manifest["sample_rate_hz"] else "the ADC converting as fast as the core takes samples")
     est = manifest.get("timing")
     timing = "" if not est else (
