@@ -46,7 +46,7 @@ from kfpga.core.formats import (
     precision_frac_bits,
     register_formats,
 )
-from kfpga.core.params import matrix, number
+from kfpga.core.params import check_measured_start, matrix, number
 from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
 from kfpga.model import start
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
@@ -156,6 +156,7 @@ class StateSpaceParams:
         if len(x0) != n:
             raise ValueError(f"x0 must have {n} entries (one per state), not {len(x0)}: {self.x0!r}")
         s(self, "x0", tuple(number(f"x0[{i}]", v) for i, v in enumerate(x0)))
+        check_measured_start(self.x0, self.H)
         s(self, "T", number("T", self.T, minimum=0.0, strict=True))
         names = tuple(self.observations) or (("y",) if m == 1 else tuple(f"y{j + 1}" for j in range(m)))
         if len(names) != m or not all(isinstance(v, str) and v.isidentifier() for v in names) or len(set(names)) != m:

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from kfpga.core.params import matrix, number, vector
+from kfpga.core.params import check_measured_start, matrix, number, vector
 from kfpga.model.start import check_init, measured_start_float
 
 __all__ = [
@@ -73,6 +73,7 @@ class KalmanParams:
         s(self, "R", number("R", self.R, minimum=0.0, strict=True))
         s(self, "P0", matrix("P0", self.P0, 2, 2, symmetric=True, positive_definite=True))
         s(self, "x0", vector("x0", self.x0, 2))
+        check_measured_start(self.x0, ((1.0, 0.0),))
 
     @property
     def phi(self):

@@ -122,24 +122,41 @@ def csv_source(path, *, clip=False, config=None, adc=None, sensors=1):
     """Replay a CSV: columns ``y0``..``y5`` if present, else the ``y`` column on all six. A
     ``config`` with several inputs reads their columns (the observation names) onto the ADC
     channels ``adc``, one per input. ``sensors`` on a multiplexer read columns ``y0`` ..
-    ``y<N-1>``, one row a sample of each (:func:`sensor_source`)."""
+    ``y<N-1>``, one row a sample of each (:func:`sensor_source`). The truth, for the RMSE
+    figures: a ``truth`` column with ``y`` or the inputs; ``truth0``.. with ``y0``.. ."""
+    header = read_header(path)
     if sensors > 1:
-        header = read_header(path)
         missing = [f"y{s}" for s in range(sensors) if f"y{s}" not in header]
         if missing:
             raise InputError(f"{path}: {sensors} sensors on a multiplexer replay columns y0..y{sensors - 1}, one per "
                              f"sensor; the header lacks {', '.join(missing[:4])}{' ...' if len(missing) > 4 else ''}")
         codes = np.stack([read_samples(path, clip=clip, column=f"y{s}").y for s in range(sensors)])
-        return sensor_source(codes, None, adc[0] if adc else 0, name=f"csv {path}, {sensors} sensors")
+        truths = _truths(path, header, [f"truth{s}" for s in range(sensors)])
+        return sensor_source(codes, truths, adc[0] if adc else 0, name=f"csv {path}, {sensors} sensors")
     if config is not None and len(config.inputs) > 1:
         samples = read_samples(path, clip=clip, columns=config.inputs)
         codes = np.zeros((6, len(samples)), dtype=np.int64)
+        truth = None if samples.truth is None else np.zeros((6, len(samples)))
         for channel, obs in zip(adc, config.inputs, strict=True):
             codes[channel] = samples.codes[obs]
-        return Source(codes, name=f"csv {path}")
-    header = read_header(path)
+            if truth is not None:
+                truth[channel] = samples.truth
+        return Source(codes, truth=truth, name=f"csv {path}")
     if all(f"y{c}" in header for c in range(6)):
         codes = np.stack([read_samples(path, clip=clip, column=f"y{c}").y for c in range(6)])
+        truth = _truths(path, header, [f"truth{c}" for c in range(6)])
     else:
-        codes = np.tile(read_samples(path, clip=clip).y, (6, 1))
-    return Source(codes, name=f"csv {path}")
+        samples = read_samples(path, clip=clip)
+        codes = np.tile(samples.y, (6, 1))
+        truth = None if samples.truth is None else np.tile(samples.truth, (6, 1))
+    return Source(codes, truth=truth, name=f"csv {path}")
+
+
+def _truths(path, header, names):
+    """The truth columns ``names`` of a file (one per channel or sensor) as rows, or ``None``
+    when the file lacks any of them."""
+    from kfpga.core.csvio import read_series
+
+    if not all(name in header for name in names):
+        return None
+    return np.stack([read_series(path, column=name) for name in names])

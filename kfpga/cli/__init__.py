@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 
 from kfpga import __version__
 from kfpga.cli import (
@@ -100,6 +102,10 @@ def synopsis(width=110):
     return "\n".join(lines)
 
 
+def _terminated(signum, frame):
+    raise KeyboardInterrupt
+
+
 def main(argv=None):
     from kfpga.core.errors import USER_ERRORS
 
@@ -107,6 +113,9 @@ def main(argv=None):
     args, extra = parser.parse_known_args(argv)
     if extra:  # report it as the command's error, under the command's usage
         _subparsers(parser)[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
+    if threading.current_thread() is threading.main_thread():
+        # a kill (SIGTERM) unwinds like Ctrl-C, so an output being written is removed, not left half-written
+        signal.signal(signal.SIGTERM, _terminated)
     try:
         return args.func(args)
     except USER_ERRORS as exc:

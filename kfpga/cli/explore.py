@@ -68,7 +68,7 @@ def run(args):
 
 
 def _plot(found, need, path, title):
-    from kfpga.core.plots import pyplot
+    from kfpga.core.plots import pyplot, save_figure
 
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 5))
@@ -87,5 +87,4 @@ def _plot(found, need, path, title):
     ax.legend(loc="best")
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)

@@ -17,7 +17,8 @@ def add_parser(sub):
     common.add_design_args(p, "1: filter one ADC channel; 6: sample all six with one HOLD and filter each (default: 1)")
     p.epilog = ("example: kfpga generate --config tracker.toml --out build/tracker; "
                 "kfpga generate --filter alphabeta --channels 64 --out build/tracks (64 sensors on a multiplexer)")
-    p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder (created; a folder it wrote before is replaced whole)")
     p.add_argument("--channel", type=common.adc_channel, metavar="CH",
                    help="the channel of --channels 1: 0..5 or A0, A1, B0, B1, C0, C1 (default: A0)")
     p.add_argument("--ratio", type=int, default=10, metavar="N", help="system clock / ADC clock (default: 10)")
@@ -32,11 +33,11 @@ def add_parser(sub):
 
 
 def run(args):
-    from kfpga.core.paths import check_output_dir
+    from kfpga.core.paths import atomic_dir, check_output_dir
     from kfpga.flows.quartus import write_project
     from kfpga.hw.top import out_field
 
-    check_output_dir(args.out, option="--out")
+    check_output_dir(args.out, option="--out", marker="manifest.json")
     common.check_channel(args)
     config = common.load_config(args, hardware=True)
     common.warn_precision(config)
@@ -54,9 +55,11 @@ def run(args):
     _check_pins(config, field, args.pins, args.ratio, sensors)  # every refusal before the design search prints anything
     architecture = common.architecture(args, config, args.channels)
     timing = _timing(args, config, architecture)
-    manifest = write_project(args.out, config, variant=args.variant, six_channel=args.channels == 6,
-                             channel=args.channel, ratio=args.ratio, pins=args.pins, out_field=field, prefilter=pre,
-                             architecture=architecture, stages=args.stages, timing=timing, sensors=sensors)
+    with atomic_dir(args.out) as folder:  # the folder appears whole, replacing the one written before
+        manifest = write_project(folder, config, variant=args.variant, six_channel=args.channels == 6,
+                                 channel=args.channel, ratio=args.ratio, pins=args.pins, out_field=field,
+                                 prefilter=pre, architecture=architecture, stages=args.stages, timing=timing,
+                                 sensors=sensors)
     _print(args, config, field, manifest, pre)
     if not args.no_lint:
         _lint(args.out)

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from kfpga.cli import common
 from kfpga.core.errors import UsageError
 
@@ -26,7 +24,7 @@ def add_parser(sub):
 
 
 def run(args):
-    from kfpga.core.paths import check_output_file
+    from kfpga.core.paths import check_output_file, write_text
     from kfpga.flows.quartus import pin_table
     from kfpga.hw.top import out_field
 
@@ -41,7 +39,7 @@ def run(args):
     if not args.write:
         print(text, end="")
         return 0
-    Path(args.write).write_text(text)
+    write_text(args.write, text)
     missing = sum(1 for line in text.splitlines() if line.endswith(",3.3-V LVTTL,choose a free user I/O pin"))
     common.info(f"wrote {args.write}" + (f"; {missing} port bit(s) still need a pin of your board" if missing else ""))
     return 0

@@ -4,7 +4,6 @@ and every variant at once."""
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -81,7 +80,7 @@ def _scenario(args, config):
     from kfpga.flows.propose import Signal
     from kfpga.model import scenarios
 
-    n = args.samples or 20000
+    n = common.check_samples(args.samples or 20000, runs=args.seeds)
     first = common.pick_seed(args.seed)
     seeds = list(range(first, first + args.seeds))
     runs = [scenarios.for_config(args.scenario, n, s, config) for s in seeds]
@@ -102,7 +101,7 @@ def _variants(args, config):
 
 def run(args):
     from kfpga.core.config import analysed_ranges
-    from kfpga.core.paths import check_output_file
+    from kfpga.core.paths import check_output_file, write_text
     from kfpga.flows.propose import proposal_toml, propose
 
     common.check_signal_args(args)
@@ -123,8 +122,8 @@ def run(args):
     step.close()
     ranges = analysed_ranges(config.params, filter=config.filter)
     if out:
-        Path(out).write_text(proposal_toml(result, ranges, budget=args.budget, objective=args.objective,
-                                           seconds=result.seconds, signals=described))
+        write_text(out, proposal_toml(result, ranges, budget=args.budget, objective=args.objective,
+                                      seconds=result.seconds, signals=described))
     rows = [{"point": name, "default": str(config.formats[name]), "proposed": str(fmt),
              "analysed_max": ranges.get(name), "bound_by": result.bound.get(name)}
             for name, fmt in result.config.formats.items()]

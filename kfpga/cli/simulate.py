@@ -90,10 +90,10 @@ def _simulate(args, config, pre, params):
     try:
         if python_adc:
             result = run(built, "test_top", testcase="system_bit_exact", params=params, waves=args.waves,
-                         on_progress=progress, tag=f"simulate-{args.seed}")
+                         on_progress=progress, tag=f"simulate-{args.seed or 0}")
         else:
             result = system.run(built, params=params, samples=args.samples, on_progress=progress,
-                                tag=f"simulate-{args.seed}")
+                                tag=f"simulate-{args.seed or 0}")
         failed = None
     except (SimulationFailed, system.SystemRunFailed) as exc:
         result, failed = {}, str(exc)
@@ -113,7 +113,7 @@ def _copy_waves(args, result):
                         "liblz4-dev)")
     waves = []
     for path in result.get("waves", []):
-        dest = Path("build") / "waves" / f"{args.variant}_{args.simulator}_{args.seed}{Path(path).suffix}"  # under ./build
+        dest = Path("build") / "waves" / f"{args.variant}_{args.simulator}_{args.seed or 0}{Path(path).suffix}"  # under ./build
         dest.parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(path, dest)
         waves.append(str(dest))
@@ -179,7 +179,8 @@ def _print(args, config, pre, summary):
         "channels " + ", ".join(f"{CHANNELS[c]} ({n})" for n, c in zip(config.inputs, args.adc, strict=True)))
     rate = summary["sample_rate_hz"]
     print(f"kfpga simulate: {config.filter} filter, {args.variant} variant on the {summary['architecture']} core, "
-          f"{where}" + (f" at {rate:g} Hz" if rate else "") + f", {args.simulator}, seed {args.seed}")
+          f"{where}" + (f" at {rate:g} Hz" if rate else "") + f", {args.simulator}, "
+          + (f"input {args.input}" if args.input else f"seed {args.seed}"))
     verdict = "bit-exact" if summary["mismatches"] == 0 else "MISMATCHES"
     print(f"  estimates compared      {summary['samples']}   mismatches {summary['mismatches']} ({verdict})")
     if summary["sensors"]:

@@ -19,7 +19,8 @@ def add_parser(sub):
                                    "2: bad arguments.")
     common.add_design_args(p, "filter one channel or all six (default: 1)")
     p.add_argument("--channel", type=common.adc_channel, metavar="CH", help="channel of --channels 1 (default: A0)")
-    p.add_argument("--out", required=True, metavar="DIR", help="the folder to write (created if needed)")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="the folder to write (created; a folder it wrote before is replaced whole)")
     common.add_adc_source_args(p)
     p.add_argument("--run-icarus", action="store_true", help="also compile and run it with Icarus Verilog")
     common.add_json(p)
@@ -27,15 +28,15 @@ def add_parser(sub):
 
 
 def run(args):
+    from kfpga.core.paths import atomic_dir, check_output_dir
     from kfpga.core.tools import simulator_available
     from kfpga.sim.testbench import run_icarus, write_testbench
 
+    check_output_dir(args.out, option="--out", marker="testbench.json")
     common.check_channel(args)
     config = common.load_config(args, hardware=True)
     common.check_channel(args, config)
     out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise UsageError(f"--out {args.out} is a file, not a folder")
     if args.run_icarus:
         ok, why = simulator_available("icarus")
         if not ok:
@@ -47,9 +48,10 @@ def run(args):
     params = common.adc_source_params(args, config)
     architecture = common.architecture(args, config, args.channels)
     common.info(f"writing the testbench of {args.samples} estimates into {out} ...")
-    info = write_testbench(out, config, variant=args.variant, six=args.channels == 6, channel=args.channel,
-                           samples=args.samples, params=params, prefilter=pre, architecture=architecture,
-                           stages=args.stages, sensors=common.sensors(args))
+    with atomic_dir(out) as folder:  # the folder appears whole, replacing the one written before
+        info = write_testbench(folder, config, variant=args.variant, six=args.channels == 6, channel=args.channel,
+                               samples=args.samples, params=params, prefilter=pre, architecture=architecture,
+                               stages=args.stages, sensors=common.sensors(args))
     result = {**info, "out": str(out)}
     if args.run_icarus:
         common.info("running it on Icarus ...")

@@ -121,7 +121,13 @@ class FilterConfig:
                                   f"({spec.points[name].description})")
             if not isinstance(fmt, QFormat):
                 raise ConfigError(f"formats.{name} must be a QFormat, not {fmt!r}")
-        merged = default_formats(self.params, filter=spec.name)
+        try:
+            merged = default_formats(self.params, filter=spec.name)
+        except ConfigError:
+            raise
+        except (ArithmeticError, ValueError) as exc:  # numbers no format or float iteration can hold
+            raise ConfigError(f"the model's numbers are out of reach of its default formats ({exc}); bring "
+                              "Q, R, P0 and T closer to the sizes of the ADC codes they describe") from None
         merged.update(given)
         object.__setattr__(self, "formats", MappingProxyType({name: merged[name] for name in names}))
         object.__setattr__(self, "pinned", tuple(name for name in names if name in given))

@@ -7,7 +7,16 @@ import math
 
 import numpy as np
 
-__all__ = ["number", "vector", "matrix"]
+__all__ = ["number", "vector", "matrix", "check_measured_start", "USABLE", "MEASURED_LIMIT"]
+
+#: The magnitudes a model number may have (besides 0): the fixed-point formats of wider spans
+#: than this (100 orders of ten) cannot be held in 64-bit sums, and the float references lose
+#: every digit of a sum of such terms.
+USABLE = (1e-15, 1e15)
+
+#: The largest start value of a state an observation measures, in ADC codes: four times the
+#: 16-bit range (a start beyond it makes every format as wide as the start, for nothing).
+MEASURED_LIMIT = 4 * 32768
 
 
 def number(name, value, *, minimum=None, strict=False):
@@ -19,6 +28,9 @@ def number(name, value, *, minimum=None, strict=False):
         raise ValueError(f"{name} must be finite, not {value!r}")
     if minimum is not None and (value <= minimum if strict else value < minimum):
         raise ValueError(f"{name} must be {'>' if strict else '>='} {minimum:g}, not {value!r}")
+    if value != 0 and not USABLE[0] <= abs(value) <= USABLE[1]:
+        raise ValueError(f"{name} = {value:g} is outside the usable range: 0, or {USABLE[0]:g} to {USABLE[1]:g} in "
+                         "magnitude")
     return value
 
 
@@ -50,3 +62,17 @@ def matrix(name, value, rows, cols, *, symmetric=False, positive_definite=False)
         if not np.all(eig > 0):
             raise ValueError(f"{name} must be positive definite, not {value!r} (eigenvalues {', '.join(f'{e:.4g}' for e in eig)})")
     return out
+
+
+def check_measured_start(x0, h):
+    """Refuse a start value of a measured state far beyond the ADC's range (``ValueError``
+    naming ``x0[i]`` and the limit): a row of ``h`` with one nonzero entry ``h[j][i]`` measures
+    state i, whose codes are then at most :data:`MEASURED_LIMIT` / ``|h[j][i]|``."""
+    for row in h:
+        nonzero = [i for i, v in enumerate(row) if v != 0]
+        if len(nonzero) == 1:
+            i = nonzero[0]
+            limit = MEASURED_LIMIT / abs(row[i])
+            if abs(x0[i]) > limit:
+                raise ValueError(f"x0[{i}] = {x0[i]:g} is far beyond the ADC's range of the state an observation "
+                                 f"measures (+-32768 codes): at most +-{limit:g}")

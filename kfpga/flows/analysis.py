@@ -11,7 +11,7 @@ import numpy as np
 from kfpga.core.config import FilterConfig, analysed_ranges, default_formats
 from kfpga.core.fixedmodel import FixedModel
 from kfpga.core.formats import MAX_OPERAND_BITS
-from kfpga.core.plots import pyplot
+from kfpga.core.plots import pyplot, save_figure
 
 __all__ = ["sample_count", "rmse", "sqnr_db", "float_run", "Comparison", "compare", "limit_cycles", "sweep",
            "precision_warnings", "startup_samples",
@@ -364,8 +364,7 @@ def plot_compare(cmp_, path, title=""):
     ax.set_ylabel("samples")
     for a in fig.axes[:-2]:
         a.set_xlabel(unit)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path, dpi=100)
 
 
 def plot_sweep(rows, narrowest, path, title="", budget=0.01):
@@ -394,5 +393,4 @@ def plot_sweep(rows, narrowest, path, title="", budget=0.01):
     ax2.plot(bits, [r["sqnr_db"] for r in rows], "o-", color="tab:purple")
     ax2.set_ylabel("SQNR fixed vs float (dB)")
     ax2.set_xlabel("multiplier operand width (bits)")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)

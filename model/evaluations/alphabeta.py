@@ -188,7 +188,7 @@ def alpha_beta_findings(result):
 
 def alpha_beta_plot(result, path):
     """The paper's figures: the tracks (truth, plots, filtered), and the position error against time."""
-    from kfpga.core.plots import pyplot
+    from kfpga.core.plots import pyplot, save_figure
 
     plt = pyplot()
 
@@ -210,8 +210,7 @@ def alpha_beta_plot(result, path):
     b.set(title="position error of target 0", xlabel="scan", ylabel="error (px)")
     b.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 # -- seeds/002: the 53H outlier smoother on navigation data -----------------------------------------------

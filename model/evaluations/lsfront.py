@@ -197,7 +197,7 @@ def ls_frontend_findings(result):
 
 def ls_frontend_plot(result, path):
     """The patent's fig. 4: the velocity estimates through the deceleration, and their errors."""
-    from kfpga.core.plots import pyplot
+    from kfpga.core.plots import pyplot, save_figure
 
     plt = pyplot()
 
@@ -215,8 +215,7 @@ def ls_frontend_plot(result, path):
     b.set(title="estimate - true speed", xlabel="time (s)", ylabel="error (m/s)", ylim=(-0.3, 0.3))
     a.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 EVALUATION = Evaluation(

@@ -195,7 +195,7 @@ def _fading_finding(result):
 
 def roll_plot(result, path):
     """The paper's figs. 4-5: the roll and its predictions, and the prediction errors."""
-    from kfpga.core.plots import pyplot
+    from kfpga.core.plots import pyplot, save_figure
 
     plt = pyplot()
 
@@ -227,8 +227,7 @@ def roll_plot(result, path):
           ylabel="% of updates")
     c.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 # -- seeds/003: the least-squares front end ---------------------------------------------------------------

@@ -272,7 +272,7 @@ def tukey53h_findings(result):
 
 def tukey53h_plot(result, path):
     """The paper's figs. 5-6: east and north velocity before and after each method."""
-    from kfpga.core.plots import pyplot
+    from kfpga.core.plots import pyplot, save_figure
 
     plt = pyplot()
 
@@ -293,8 +293,7 @@ def tukey53h_plot(result, path):
     fig.legend(handles, labels, loc="lower center", ncol=5, fontsize=8)
     axes[-1].set_xlabel(f"time (s), seed {result['seed']}")
     fig.tight_layout(rect=(0, 0.04, 1, 1))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 # -- seeds/000: the ship-roll interval predictor ------------------------------------------------------------
