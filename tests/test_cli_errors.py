@@ -127,6 +127,43 @@ CASES = [
     ("sweep-budget-zero", ["sweep", "--budget", "0%"], {}, "argument --budget: must be more than 0 % and at most 100 %, not '0%'"),
     ("sweep-budget-text", ["sweep", "--budget", "one"], {}, "argument --budget: must be a percentage like 1% or 0.5%, not 'one'"),
     ("argparse-unknown", ["filters", "--verbose"], {}, "kfpga filters: error: unrecognized arguments: --verbose"),
+    # outputs that cannot be written, checked before the work starts
+    ("generate-out-proc", ["generate", "--out", "/proc/x/gen"], {}, None),
+    ("generate-out-file", ["generate", "--out", "f.txt"], {"f.txt": "x"}, "--out f.txt: is a file; give a folder"),
+    ("generate-out-foreign", ["generate", "--out", "d"], {"d/mine.txt": "x"},
+     "--out d: the folder holds files this command did not write (no manifest.json); give a new or empty folder"),
+    ("testbench-out-proc", ["testbench", "--out", "/proc/x/tb"], {}, None),
+    ("testbench-out-under-file", ["testbench", "--out", "f.txt/tb"], {"f.txt": "x"},
+     "--out f.txt/tb: f.txt is a file, not a folder"),
+    ("compare-plot-proc", ["compare", "--plot", "/proc/x.png", "--samples", "100", "--seed", "1"], {}, None),
+    ("propose-out-proc", ["propose", "--out", "/proc/x.toml", "--samples", "100"], {}, None),
+    ("filter-output-dir", ["filter", "--input", "in.csv", "--output", "d"], {"in.csv": GOOD_CSV, "d/x": ""},
+     "--output d: is a directory; give a file name"),
+    # sample counts beyond what the machine holds, refused before anything is allocated
+    ("compare-huge", ["compare", "--samples", "1000000000000", "--seed", "1"], {}, None),
+    ("simulate-huge", ["simulate", "--samples", "1000000000000", "--seed", "1"], {}, None),
+    ("testbench-huge", ["testbench", "--samples", "1000000000000", "--seed", "1", "--out", "tb"], {}, None),
+    ("propose-huge", ["propose", "--samples", "10000000", "--seeds", "1000", "--seed", "1"], {}, None),
+    # numbers no format holds
+    ("model-q-huge", ["compare", "--config", "k.toml"], {"k.toml": "[model]\nQ = 1e300\n"},
+     "model.Q = 1e+300 is outside the usable range: 0, or 1e-15 to 1e+15 in magnitude"),
+    ("model-r-tiny", ["compare", "--config", "k.toml"], {"k.toml": "[model]\nR = 1e-300\n"},
+     "model.R = 1e-300 is outside the usable range: 0, or 1e-15 to 1e+15 in magnitude"),
+    ("model-p0-huge", ["compare", "--config", "k.toml"], {"k.toml": "[model]\nP0 = [[1e300, 0.0], [0.0, 1.0]]\n"},
+     "model.P0[0][0] = 1e+300 is outside the usable range: 0, or 1e-15 to 1e+15 in magnitude"),
+    ("model-x0-far", ["compare", "--config", "k.toml"], {"k.toml": "[model]\nx0 = [1e9, 0.0]\n"},
+     "model.x0[0] = 1e+09 is far beyond the ADC's range of the state an observation measures (+-32768 codes): "
+     "at most +-131072"),
+    ("model-r-out-of-reach", ["compare", "--config", "k.toml"], {"k.toml": "[model]\nR = 1e14\n"}, None),
+    # CSV files: what is still refused, with its line
+    ("csv-blank-middle", ["filter", "--input", "i.csv", "--output", "o.csv"], {"i.csv": "y\n1\n\n2\n"},
+     "i.csv: line 3: a blank line; every row is a sample (delete the line, or give it a value)"),
+    ("csv-headerless-two", ["filter", "--input", "i.csv", "--output", "o.csv"], {"i.csv": "1,2\n3,4\n"},
+     "i.csv: line 1: no header line; name the 2 columns in a first line (for example y,truth)"),
+    ("csv-semicolon-missing", ["filter", "--input", "i.csv", "--output", "o.csv"], {"i.csv": "y;truth\n1;2\n3\n"},
+     "i.csv: line 3: no value in column 'truth'"),
+    ("csv-comment-then-text", ["filter", "--input", "i.csv", "--output", "o.csv"], {"i.csv": "# log\ny\n1\nabc\n"},
+     "i.csv: line 4: y = 'abc' is not a number"),
 ]
 
 # cases whose error line is only checked for its subject (the exact text is tested elsewhere)
@@ -135,11 +172,22 @@ SUBJECTS = {
     "pins-missing-bit": "p.csv: no pin for rst_n, adc_clk",
     "pins-wide-x1": "no pin for out_data[36], out_data[37], out_data[38], out_data[39]",
     "argparse-choice": "argument --simulator: invalid choice: 'modelsim'",
+    "generate-out-proc": "--out /proc/x/gen: cannot write into /proc (",
+    "testbench-out-proc": "--out /proc/x/tb: cannot write into /proc (",
+    "compare-plot-proc": "--plot /proc/x.png: cannot write into /proc (",
+    "propose-out-proc": "--out /proc/x.toml: cannot write into /proc (",
+    "compare-huge": "--samples 1000000000000 needs about ",
+    "simulate-huge": "--samples 1000000000000 needs about ",
+    "testbench-huge": "--samples 1000000000000 needs about ",
+    "propose-huge": "--samples 10000000 needs about ",
+    "model-r-out-of-reach": "the model's numbers are out of reach of its default formats",
 }
 
 
 def snapshot(folder):
-    return {p.relative_to(folder): hashlib.sha1(p.read_bytes()).hexdigest() for p in folder.rglob("*") if p.is_file()}
+    """Every file (its hash) and folder (``None``) under ``folder``."""
+    return {p.relative_to(folder): hashlib.sha1(p.read_bytes()).hexdigest() if p.is_file() else None
+            for p in folder.rglob("*")}
 
 
 @pytest.mark.parametrize(("argv", "files", "message"), [pytest.param(a, f, m, id=i) for i, a, f, m in CASES])

@@ -62,12 +62,13 @@ class Table:
     line: int = 1  # of the header (comment lines may come first)
 
 
-def read_table(path, *, single="y"):
+def read_table(path, *, single="y", unnamed=False):
     """Read ``path`` as a table: a UTF-8 BOM, ``#`` comment lines and blank lines at the end are
     dropped; the separator is a comma, a semicolon or a tab (the one the first line uses most);
     the first line is a header unless all its cells are numbers. A file of one column with no
-    header is the column ``single``. A blank line among the rows is refused (every row is a
-    sample), naming its line."""
+    header is the column ``single``; several columns with no header are refused, or with
+    ``unnamed`` named ``column 1``, ``column 2``, ... A blank line among the rows is refused
+    (every row is a sample), naming its line."""
     path = Path(path)
     text = read_text(path, what="file")
     lines = [(n, line) for n, line in enumerate(text.splitlines(), start=1) if not line.lstrip().startswith("#")]
@@ -83,7 +84,9 @@ def read_table(path, *, single="y"):
         raise InputError(f"{path}: not readable as CSV ({exc})") from None
     names = [h.strip() for h in cells[0]]
     header = not all(_is_number(name) for name in names)
-    if not header:
+    if not header and unnamed:
+        names = [f"column {k + 1}" for k in range(len(names))]
+    elif not header:
         if len(names) != 1:
             raise InputError(f"{path}: line {lines[0][0]}: no header line; name the {len(names)} columns in a first "
                              "line (for example y,truth)")
@@ -179,7 +182,7 @@ def read_series(path, *, column=None):
     column, or the one named ``column``, or the last one. Every problem raises
     :class:`InputError` with the file and line: no rows, a missing column, a cell that is empty,
     not a number or not finite."""
-    table = read_table(path, single="column 1")
+    table = read_table(path, single="column 1", unnamed=True)
     names = table.names
     if column is not None and column not in names:
         raise InputError(f"{path}: line {table.line}: no column named {column!r} (the header has: {', '.join(names)})")
