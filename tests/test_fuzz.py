@@ -8,7 +8,6 @@ example counts keep the whole file under half a minute on 2 cores."""
 
 import os
 import string
-import tomllib
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -129,10 +128,6 @@ def test_a_config_file_of_any_text_is_read_or_refused(tmp_path, text):
     path = tmp_path / "k.toml"
     path.write_text(text)
     try:
-        tomllib.loads(text)
-    except tomllib.TOMLDecodeError:
-        pass
-    try:
         FilterConfig.from_toml(path)
     except USER_ERRORS as exc:
         assert "\n" not in str(exc)
@@ -185,7 +180,7 @@ def test_the_command_line_answers_or_refuses_in_one_line(tmp_path_factory, argv,
             code = exc.code
     finally:
         os.chdir(cwd)
-    out, err = capsys.readouterr()
+    _, err = capsys.readouterr()
     assert "Traceback" not in err
     assert code in (0, 1, 2), (argv, code, err)
     if code == 2:
