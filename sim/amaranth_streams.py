@@ -15,7 +15,12 @@ from amaranth.sim import Simulator
 
 from kfpga.sim.scoreboard import Scoreboard
 
-__all__ = ["drive", "collect", "run_stream", "run_core", "run_with_deadline", "measure_timing", "StreamTimeout"]
+__all__ = ["drive", "collect", "run_stream", "run_core", "run_with_deadline", "measure_timing", "check_liveness",
+           "StreamTimeout", "AFTER_VALID"]
+
+#: The receiver's policy that raises ``ready`` only in the cycle after it has seen ``valid`` (a
+#: receiver that waits for a word before it says it can take one): ``p_ready=AFTER_VALID``.
+AFTER_VALID = "after valid"
 
 CLOCK_PERIOD_S = 1e-8
 
@@ -51,14 +56,17 @@ async def drive(ctx, port, payloads, rng, p_idle=0.0):
 
 
 async def collect(ctx, port, count, rng, p_ready=1.0, out=None):
-    """Receive ``count`` payloads from ``port``, ready with probability ``p_ready`` each cycle."""
+    """Receive ``count`` payloads from ``port``, ready with probability ``p_ready`` each cycle
+    (or, with :data:`AFTER_VALID`, only in the cycle after ``valid`` was seen high)."""
     out = [] if out is None else out
+    seen = False
     while len(out) < count:
-        ready = rng.random() < p_ready
+        ready = seen if p_ready == AFTER_VALID else rng.random() < p_ready
         ctx.set(port.ready, ready)
         _, _, valid, payload = await ctx.tick().sample(port.valid, port.payload)
         if valid and ready:
             out.append(payload)
+        seen = bool(valid) and not ready
     ctx.set(port.ready, 0)
     return out
 
@@ -77,7 +85,7 @@ def run_stream(dut, payloads, *, seed, p_idle=0.0, p_ready=1.0, extra_cycles=0, 
     sim.add_clock(CLOCK_PERIOD_S)
     # the deadline: ten times what the core needs at the offered rates, so a hang fails
     per_update = getattr(dut, "cycles_per_update", 18) + 2
-    rate = max((1 - p_idle) * p_ready, 0.05)
+    rate = max((1 - p_idle) * (0.5 if p_ready == AFTER_VALID else p_ready), 0.05)
     budget = max_cycles if max_cycles is not None else int(10 * per_update * len(payloads) / rate) + 1000
 
     async def producer(ctx):
@@ -161,3 +169,62 @@ def measure_timing(dut, config, updates=10):
     sim.add_testbench(bench)
     run_with_deadline(sim, cycles + 100)
     return produced[0] - accepted[0], np.diff(accepted).tolist(), np.diff(produced).tolist()
+
+
+def check_liveness(dut, payload, *, hold=20, settle=5):
+    """The stream contract of ``dut`` with a slow receiver, in the Amaranth simulator; raises
+    ``AssertionError`` naming the broken clause:
+
+    1. with ``o.ready`` held low and nothing pending, ``i.ready`` is high once the unit's
+       ``startup_cycles`` after reset have passed (it takes a word whatever its receiver does,
+       as long as its output register is empty);
+    2. a word taken while ``o.ready`` is low makes ``o.valid`` rise ``dut.latency`` cycles after
+       the handshake, as with a ready receiver;
+    3. ``o.valid`` and the payload then hold while ``o.ready`` stays low (``hold`` cycles);
+    4. one cycle of ``o.ready`` takes the word, and ``o.valid`` falls.
+
+    Returns ``{"latency": ..., "held_payload": ...}``.
+    """
+    sim = Simulator(dut)
+    sim.add_clock(CLOCK_PERIOD_S)
+    found = {}
+    settle += getattr(dut, "startup_cycles", 0)
+    budget = settle + dut.latency + hold + 40 + 4 * getattr(dut, "cycles_per_update", 1)
+
+    async def bench(ctx):
+        ctx.set(dut.o.ready, 0)
+        ctx.set(dut.i.valid, 0)
+        for _ in range(settle):
+            await ctx.tick()
+        assert ctx.get(dut.i.ready), "1: i.ready is low with o.ready low and nothing pending"
+        ctx.set(dut.i.payload, payload)
+        ctx.set(dut.i.valid, 1)
+        cycle, taken = 0, None
+        while True:
+            _, _, ready, valid = await ctx.tick().sample(dut.i.ready, dut.o.valid)
+            if taken is None and ready:
+                taken = cycle
+                ctx.set(dut.i.valid, 0)
+            if valid:
+                break
+            cycle += 1
+            assert cycle < budget, "2: o.valid never rose for a word taken while o.ready was low"
+        found["latency"] = cycle - taken
+        assert found["latency"] == dut.latency, (f"2: o.valid rose {found['latency']} cycles after the handshake "
+                                                 f"with o.ready low; the declared latency is {dut.latency}")
+        held = ctx.get(dut.o.payload)
+        found["held_payload"] = held
+        for k in range(hold):
+            _, _, valid, now = await ctx.tick().sample(dut.o.valid, dut.o.payload)
+            assert valid, f"3: o.valid fell {k} cycles into a wait of the receiver, the word unread"
+            assert now == held, f"3: the payload changed while o.valid waited for o.ready ({k} cycles in)"
+        ctx.set(dut.o.ready, 1)
+        _, _, valid = await ctx.tick().sample(dut.o.valid)
+        assert valid, "4: o.valid fell before the receiver took the word"
+        ctx.set(dut.o.ready, 0)
+        _, _, valid = await ctx.tick().sample(dut.o.valid)
+        assert not valid, "4: o.valid stayed high after the only word was taken"
+
+    sim.add_testbench(bench)
+    run_with_deadline(sim, budget + hold + 20, "the liveness check")
+    return found
