@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 BUILD  := build
 
-.PHONY: demo test bench lint venv clean formal mutate regress
+.PHONY: demo test bench lint venv clean formal mutate mutate-source regress
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -43,9 +43,16 @@ bench: $(STAMP)
 formal: $(STAMP)
 	$(BIN)/python -m kfpga.verify.formal
 
-# mutation testing of every block: Yosys mutants, killed by the benches or the properties (see README)
+# mutation testing of every block: Yosys mutants, killed by the benches or the properties, then
+# mutants of the Python source of hw/, killed by the tests that run their line (see README)
 mutate: $(STAMP)
-	$(BIN)/python -m kfpga.verify.mutate
+	$(BIN)/python -m kfpga.verify.mutate; netlist=$$?; \
+	$(BIN)/python -m kfpga.verify.srcmutate; source=$$?; \
+	exit $$(( netlist || source ))
+
+# the source-level mutants alone (about an hour on 2 cores, see README)
+mutate-source: $(STAMP)
+	$(BIN)/python -m kfpga.verify.srcmutate
 
 # long regressions: 10^6 whole-design estimates per variant on Verilator, in one-channel and in
 # six-channel mode, and 10^5 per variant on Icarus, each with its own seed (printed); 0 mismatches

@@ -1,0 +1,80 @@
+"""The source-level mutation of ``make mutate`` (``kfpga/verify/srcmutate.py``): its operators
+change what they say, in logic only, and every mutant it draws is valid Python that differs."""
+
+import ast
+import random
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from kfpga.verify.srcmutate import NOT_RTL, apply, mutants_of, sites
+
+SOURCE = textwrap.dedent('''\
+    """A block."""
+    from amaranth import Module, Mux
+
+
+    def elaborate(self, width=4):
+        """The logic."""
+        if width < 2:
+            raise ValueError(f"width must be >= 2, not {width + 0}")
+        m = Module()
+        with m.If(self.a == self.b):
+            m.d.sync += self.x.eq(self.a + 1)
+        with m.Elif(self.a < self.b):
+            m.d.comb += self.y.eq(Mux(self.s, self.a, self.b) & self.c)
+        self._wire(m)
+        return m
+''')
+
+
+@pytest.fixture
+def block(tmp_path):
+    path = tmp_path / "block.py"
+    path.write_text(SOURCE)
+    return path
+
+
+def test_every_operator_has_its_site(block):
+    found = {(op, text) for op, _, text in sites(block)}
+    assert ("==/!=", "(self.a != self.b)") in found
+    assert ("</<=", "(self.a <= self.b)") in found
+    assert ("+/-", "(self.a - 1)") in found
+    assert ("&/|", "(Mux(self.s, self.a, self.b) | self.c)") in found
+    assert ("Mux swap", "Mux(self.s, self.b, self.a)") in found
+    assert ("const+-1", "0") in found  # the 1 of a + 1
+    assert ("not", "~(self.a == self.b)") in found and ("not", "~(self.a < self.b)") in found
+    drops = [node for op, node, _ in sites(block) if op == "drop"]
+    assert sorted(n.lineno for n in drops) == [11, 13, 14]
+
+
+def test_no_site_in_a_check_a_message_a_default_or_a_docstring(block):
+    lines = {node.lineno for _, node, _ in sites(block)}
+    assert not lines & {1, 5, 6, 7, 8}  # the docstrings, the default width=4, the check and its message
+
+
+def test_each_mutant_is_valid_python_that_differs(block):
+    mutants = mutants_of(block.name, 100, random.Random(3), root=block.parent)
+    assert len(mutants) == len(sites(block))
+    for m in mutants:
+        new = apply(m, block.parent)
+        assert new != SOURCE
+        ast.parse(new)
+        changed = [k + 1 for k, (a, b) in enumerate(zip(SOURCE.splitlines(), new.splitlines(), strict=True)) if a != b]
+        assert changed and changed[0] == m.line
+
+
+def test_the_draw_is_seeded(block):
+    one = [(m.line, m.operator) for m in mutants_of(block.name, 4, random.Random(7), root=block.parent)]
+    two = [(m.line, m.operator) for m in mutants_of(block.name, 4, random.Random(7), root=block.parent)]
+    assert one == two and len(one) == 4
+
+
+def test_every_rtl_file_of_hw_has_three_sites_at_least():
+    root = Path(__file__).parents[1]
+    for path in sorted((root / "hw").glob("*.py")):
+        rel = path.relative_to(root).as_posix()
+        if rel in NOT_RTL:
+            continue
+        assert len(mutants_of(rel, 3, random.Random(1), root=root)) == 3, rel
