@@ -74,7 +74,7 @@ def test_testbench_script_and_plain_verilog(tmp_path, seed):
 def test_testbench_bad_arguments(tmp_path, capsys):
     (tmp_path / "file").write_text("x")
     assert main(["testbench", "--out", str(tmp_path / "file")]) == 2
-    assert "is a file, not a folder" in capsys.readouterr().err
+    assert "is a file; give a folder" in capsys.readouterr().err
     assert main(["testbench", "--out", str(tmp_path / "x"), "--channels", "6", "--channel", "A1"]) == 2
     assert "--channel does not apply with --channels 6" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:
