@@ -21,18 +21,71 @@ def add_parser(sub):
                    help="output folder (created; a folder it wrote before is replaced whole)")
     p.add_argument("--channel", type=common.adc_channel, metavar="CH",
                    help="the channel of --channels 1: 0..5 or A0, A1, B0, B1, C0, C1 (default: A0)")
-    p.add_argument("--ratio", type=int, default=10, metavar="N", help="system clock / ADC clock (default: 10)")
+    p.add_argument("--ratio", type=int, metavar="N", help="system clock / ADC clock (default: 10)")
     p.add_argument("--pins", metavar="CSV", help="pin table for your board (default: constraints/pins.csv)")
     p.add_argument("--out-field", metavar="FIELD", help=common.out_field_help())
     p.add_argument("--no-lint", action="store_true", help="skip the Verilator lint and Icarus parse checks")
     p.add_argument("--ignore-timing", action="store_true",
                    help="write a design whose estimated Fmax misses the clock anyway (a warning, recorded in the "
                         "manifest); without it such a design is refused")
+    p.add_argument("--core-only", action="store_true",
+                   help="the filter core alone, for your own design: PREFIX.v (every module named with the prefix), "
+                        "a datasheet (README.txt, manifest.json), a Quartus .qip, a FuseSoC .core and a "
+                        "self-checking testbench in tb/; --channels N is then its channel states (1..256)")
+    p.add_argument("--prefix", metavar="NAME", help="with --core-only: the core's module name, and the prefix of its "
+                                                    "submodules (default: kfpga_FILTER)")
     common.add_quiet(p)
     p.set_defaults(func=run)
 
 
 def run(args):
+    if args.core_only:
+        return _run_core_only(args)
+    if args.prefix is not None:
+        common.not_with("--prefix", "the board's design", "it names the core of --core-only")
+    args.ratio = 10 if args.ratio is None else args.ratio
+    return _run_board(args)
+
+
+def _run_core_only(args):
+    """``--core-only``: the core alone (:mod:`kfpga.flows.coreip`)."""
+    from kfpga.core.paths import atomic_dir, check_output_dir
+    from kfpga.flows.coreip import check_prefix, write_core
+
+    for option, value in (("--pins", args.pins), ("--ratio", args.ratio), ("--channel", args.channel),
+                          ("--out-field", args.out_field), ("--prefilter", getattr(args, "prefilter", None))):
+        if value is not None:
+            common.not_with(option, "--core-only", "the core alone has no ADC, no pins and every output field")
+    check_output_dir(args.out, option="--out", marker="manifest.json")
+    config = common.load_config(args, hardware=True)
+    common.warn_precision(config)
+    prefix = args.prefix or f"kfpga_{config.filter}"
+    try:
+        check_prefix(prefix)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    common.check_architecture(args, config)
+    try:
+        config.spec.make_core(config, args.variant, channels=args.channels,
+                              **({} if args.architecture in (None, "auto") else {"architecture": args.architecture}))
+    except ValueError as exc:
+        raise UsageError(f"--channels {args.channels}: {exc}") from None
+    architecture = common.architecture(args, config, args.channels)
+    timing = _timing(args, config, architecture)
+    with atomic_dir(args.out) as folder:
+        manifest = write_core(folder, config, variant=args.variant, prefix=prefix, channels=args.channels,
+                              architecture=architecture, stages=args.stages, timing=timing)
+    print(f"wrote {args.out}/: {', '.join(manifest['files'])}")
+    print(f"  module {prefix}: {config.filter} filter, {args.variant} variant on the {manifest['architecture']} core, "
+          f"{args.channels} channel state(s), latency {manifest['latency_cycles']} cycles, "
+          f"{manifest['cycles_per_update']} cycle(s) per update; datasheet: {args.out}/README.txt; "
+          f"testbench: {args.out}/tb/run_icarus.sh")
+    if not args.no_lint:
+        _lint(args.out, prefix)
+    return 0
+
+
+def _run_board(args):
     from kfpga.core.paths import atomic_dir, check_output_dir
     from kfpga.flows.quartus import write_project
     from kfpga.hw.top import out_field
@@ -131,17 +184,18 @@ def _print(args, config, field, manifest, pre):
               f"{manifest['prefilter']['latency_cycles']} cycles of latency")
 
 
-def _lint(out):
+def _lint(out, top=None):
     from kfpga.core.tools import iverilog_parse, iverilog_path, verilator_lint
     from kfpga.hw.generate import TOP_NAME
 
-    path = Path(out) / f"{TOP_NAME}.v"
-    rc, text = verilator_lint(path, TOP_NAME, path.parent / "verilator_lint.vlt")
+    top = top or TOP_NAME
+    path = Path(out) / f"{top}.v"
+    rc, text = verilator_lint(path, top, path.parent / "verilator_lint.vlt")
     if rc:
         raise UsageError(f"verilator --lint-only -Wall reports problems in {path}:\n{text}")
     print("verilator --lint-only -Wall: clean (waivers and their reasons: verilator_lint.vlt)")
     if iverilog_path():
-        rc, text = iverilog_parse(path, TOP_NAME)
+        rc, text = iverilog_parse(path, top)
         if rc:
             raise UsageError(f"iverilog -g2001 rejects {path}:\n{text}")
         print("iverilog -g2001: parses")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from kfpga.cli import common
@@ -23,11 +24,85 @@ def add_parser(sub):
                    help="the folder to write (created; a folder it wrote before is replaced whole)")
     common.add_adc_source_args(p)
     p.add_argument("--run-icarus", action="store_true", help="also compile and run it with Icarus Verilog")
+    p.add_argument("--core-only", action="store_true",
+                   help="the testbench of the core alone (the folder of 'generate --core-only', its tb/ with "
+                        "--samples estimates of --scenario and --seed, random gaps on both streams); --channels N "
+                        "is then its channel states")
+    p.add_argument("--prefix", metavar="NAME", help="with --core-only: the core's module name (default: kfpga_FILTER)")
+    p.epilog = ("example: kfpga testbench --config tracker.toml --out build/tb --run-icarus; "
+                "kfpga testbench --core-only --filter 53h --prefix smooth --out build/smooth --run-icarus")
     common.add_json(p)
     p.set_defaults(func=run)
 
 
 def run(args):
+    if args.core_only:
+        return _run_core_only(args)
+    if args.prefix is not None:
+        common.not_with("--prefix", "the board's testbench", "it names the core of --core-only")
+    return _run_board(args)
+
+
+def _run_core_only(args):
+    """``--core-only``: the core's folder with its testbench (:func:`kfpga.flows.coreip.write_core`)."""
+    import subprocess
+
+    from kfpga.core.paths import atomic_dir, check_output_dir
+    from kfpga.core.tools import iverilog_path, simulator_available
+    from kfpga.flows.coreip import check_prefix, write_core
+
+    for option, value in (("--channel", args.channel), ("--input", args.input), ("--glitches", getattr(args, "glitches", None)),
+                          ("--prefilter", getattr(args, "prefilter", None))):
+        if value is not None:
+            common.not_with(option, "--core-only", "the core's testbench drives its own stream from a scenario")
+    check_output_dir(args.out, option="--out", marker="manifest.json")
+    if args.run_icarus:
+        ok, why = simulator_available("icarus")
+        if not ok:
+            raise UsageError(f"--run-icarus: {why}")
+    config = common.load_config(args, hardware=True)
+    prefix = args.prefix or f"kfpga_{config.filter}"
+    try:
+        check_prefix(prefix)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    common.check_architecture(args, config)
+    samples = common.check_samples(2000 if args.samples is None else args.samples, kind="simulation")
+    seed = common.pick_seed(args.seed)
+    common.info(f"seed {seed} (replay with --seed {seed})")
+    architecture = common.architecture(args, config, args.channels)
+    with atomic_dir(args.out) as folder:
+        try:
+            manifest = write_core(folder, config, variant=args.variant, prefix=prefix, channels=args.channels,
+                                  architecture=architecture, stages=args.stages, samples=samples, seed=seed,
+                                  scenario=args.scenario)
+        except ValueError as exc:
+            raise UsageError(f"--channels {args.channels}: {exc}") from None
+    result = {"prefix": prefix, "filter": config.filter, "variant": args.variant, "architecture": manifest["architecture"],
+              "channels": args.channels, "samples": samples, "seed": seed, "out": str(Path(args.out))}
+    if args.run_icarus:
+        common.info("running it on Icarus ...")
+        tb = Path(args.out) / "tb"
+        path = f"{Path(iverilog_path()).parent}{os.pathsep}{os.environ.get('PATH', '')}"  # vvp beside iverilog
+        done = subprocess.run(["sh", "run_icarus.sh"], cwd=tb, capture_output=True, text=True,
+                              env={**os.environ, "PATH": path})
+        lines = [ln for ln in (done.stdout + done.stderr).splitlines() if ln.startswith(("PASS", "FAIL"))]
+        result.update({"icarus_exit": done.returncode,
+                       "icarus_result": lines[-1] if lines else (done.stdout + done.stderr).strip()[-300:]})
+    if args.json:
+        common.emit_json(result)
+    else:
+        print(f"kfpga testbench: {config.filter} filter, core {prefix} alone ({manifest['architecture']}, "
+              f"{args.channels} channel state(s)), {samples} estimates, in {args.out}/")
+        print(f"  Icarus:           {args.out}/tb/run_icarus.sh")
+        print(f"  ModelSim-Altera:  cd {args.out}/tb && vsim -c -do run_modelsim.do")
+        print(f"  FuseSoC:          cd {args.out} && fusesoc --cores-root . run --target sim kfpga:cores:{prefix}")
+        if args.run_icarus:
+            print(f"  Icarus run: {result['icarus_result']} (exit {result['icarus_exit']})")
+    return 0 if not args.run_icarus or result["icarus_exit"] == 0 else 1
+
+
+def _run_board(args):
     from kfpga.core.paths import atomic_dir, check_output_dir
     from kfpga.core.tools import simulator_available
     from kfpga.sim.testbench import run_icarus, write_testbench
