@@ -10,7 +10,7 @@ estimate. The testbench checks every estimate against the bit-accurate model.
 import numpy as np
 from amaranth import Array, Module, Signal, signed
 from amaranth.lib import wiring
-from amaranth.lib.wiring import In, Out
+from amaranth.lib.wiring import Out
 from amaranth.sim import Simulator
 
 from kfpga.core.config import FilterConfig
