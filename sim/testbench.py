@@ -115,6 +115,9 @@ module {TB_NAME};
                          n, conversions);
 `ifdef __ICARUS__
             $finish_and_return(failed ? 1 : 0);
+`elsif VERILATOR
+            if (failed) $stop;  // a $stop ends the run with a non-zero exit status
+            else $finish;
 `else
             $finish;
 `endif

@@ -113,10 +113,29 @@ def _run_board(args):
                                  channel=args.channel, ratio=args.ratio, pins=args.pins, out_field=field,
                                  prefilter=pre, architecture=architecture, stages=args.stages, timing=timing,
                                  sensors=sensors)
+        _board_testbench(folder, config, args, pre, architecture, sensors, manifest)
     _print(args, config, field, manifest, pre)
     if not args.no_lint:
         _lint(args.out)
     return 0
+
+
+def _board_testbench(folder, config, args, pre, architecture, sensors, manifest):
+    """``tb/``: the self-checking testbench of the design just written (300 estimates of the
+    filter's default scenario, seed 1), which the FuseSoC file's sim target runs; recorded in the
+    manifest."""
+    import json
+
+    from kfpga.sim.testbench import write_testbench
+
+    params = {"seed": 1, "scenario": config.spec.scenarios[0], "adc": list(args.adc) if args.adc else None,
+              "channel": args.adc[0] if args.adc and args.channels != 6 else None}
+    info = write_testbench(folder / "tb", config, variant=args.variant, six=args.channels == 6, channel=args.channel,
+                           samples=300, params=params, prefilter=pre, architecture=architecture, stages=args.stages,
+                           sensors=sensors)
+    manifest["testbench"] = {"folder": "tb", "samples": info["samples"], "seed": 1, "scenario": info["scenario"]}
+    manifest["files"] = sorted([*manifest["files"], *(f"tb/{name}" for name in info["files"])])
+    (folder / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
 
 
 def _check_pins(config, field, pins, ratio, sensors=1):

@@ -264,6 +264,9 @@ def write_project(out_dir, config, *, variant=None, six_channel=False, channel=N
         top=TOP_NAME, version=__version__, pin_table=label, device=DEVICE, device_ordering=DEVICE_ORDERING,
         family=FAMILY, verilog=verilog.name, sdc=f"{TOP_NAME}.sdc", pins="\n".join(pin_lines))
     (out_dir / f"{TOP_NAME}.qsf").write_text(qsf)
+    (out_dir / f"{TOP_NAME}_pins.tcl").write_text(f"# The pins of {TOP_NAME} ({label}), for FuseSoC's Quartus target\n"
+                                                  + "\n".join(pin_lines) + "\n")
+    (out_dir / f"{TOP_NAME}.core").write_text(board_fusesoc(config, verilog.name))
     (out_dir / f"{TOP_NAME}.qpf").write_text(
         f'# Quartus II project (kfpga {__version__})\nQUARTUS_VERSION = "13.0"\nPROJECT_REVISION = "{TOP_NAME}"\n')
 
@@ -297,7 +300,7 @@ def write_project(out_dir, config, *, variant=None, six_channel=False, channel=N
                    "description": desc}
                   for n, (d, w, desc) in ports.items()],
         "files": sorted([verilog.name, f"{TOP_NAME}.qsf", f"{TOP_NAME}.sdc", f"{TOP_NAME}.qpf", "manifest.json",
-                         "README.txt", "verilator_lint.vlt"]),
+                         "README.txt", "verilator_lint.vlt", f"{TOP_NAME}.core", f"{TOP_NAME}_pins.tcl"]),
     }
     raws = config.constant_raw(variant)
     manifest["constants"] = {name: {"value": c.value, "raw": raws[name],
@@ -306,6 +309,67 @@ def write_project(out_dir, config, *, variant=None, six_channel=False, channel=N
     (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
     (out_dir / "README.txt").write_text(_readme(variant, six_channel, ratio, manifest))
     return manifest
+
+
+#: The board testbench's files that FuseSoC's simulation target takes from ``tb/`` (written by
+#: ``kfpga generate`` with :func:`kfpga.sim.testbench.write_testbench`).
+BOARD_TB_FILES = ("kfpga_tb.v", "ads8364_model.v")
+BOARD_TB_DATA = ("codes.hex", "expected.hex")
+
+
+def board_fusesoc(config, verilog):
+    """``kfpga_top.core``: FuseSoC (CAPI2) for the board's design: the RTL, a ``synth`` target for
+    Quartus with the device, the .sdc and the pins, and a ``sim`` target running the
+    self-checking testbench of ``tb/`` on Icarus (default) or Verilator."""
+    tb = "\n".join(f"      - tb/{name}" for name in BOARD_TB_FILES)
+    data = "\n".join(f"      - tb/{name}: {{file_type: user, copyto: {name}}}" for name in BOARD_TB_DATA)
+    return f"""CAPI=2:
+# FuseSoC core file of the board's design (kfpga {__version__}): {config.filter} filter on the {DEVICE_ORDERING}.
+#   fusesoc --cores-root . run --target synth kfpga:board:{TOP_NAME}     (Quartus II)
+#   fusesoc --cores-root . run --target sim kfpga:board:{TOP_NAME}       (Icarus; --tool verilator)
+name: kfpga:board:{TOP_NAME}:1.0.0
+description: "{config.filter} filter, ADS8364 controller and clock divider for the {DEVICE_ORDERING}"
+
+filesets:
+  rtl:
+    files:
+      - {verilog}
+    file_type: verilogSource
+  constraints:
+    files:
+      - {TOP_NAME}.sdc: {{file_type: SDC}}
+      - {TOP_NAME}_pins.tcl: {{file_type: tclSource}}
+  tb:
+    files:
+{tb}
+    file_type: verilogSource
+  tbdata:
+    files:
+{data}
+
+targets:
+  default:
+    filesets: [rtl]
+    toplevel: {TOP_NAME}
+  synth:
+    default_tool: quartus
+    filesets: [rtl, constraints]
+    toplevel: {TOP_NAME}
+    tools:
+      quartus:
+        family: {FAMILY}
+        device: {DEVICE}
+  sim:
+    default_tool: icarus
+    filesets: [rtl, tb, tbdata]
+    toplevel: kfpga_tb
+    tools:
+      icarus:
+        iverilog_options: [-g2001]
+      verilator:
+        mode: binary
+        verilator_options: [--timing, -CFLAGS, -fcoroutines, -Wno-fatal, -Wno-lint, -Wno-style]
+"""
 
 
 def _jsonable(value):
