@@ -12,7 +12,7 @@ from kfpga.hw.clockdiv import ClockDivider
 from kfpga.hw.divider import Divider
 from kfpga.hw.top import AdcFrontend, FilterSystem
 
-__all__ = ["TOP_NAME", "LINT_WAIVERS", "figures_only", "to_verilog", "write_top", "write_block", "FORBIDDEN"]
+__all__ = ["TOP_NAME", "LINT_WAIVERS", "figures_only", "finish_with_status", "to_verilog", "write_top", "write_block", "FORBIDDEN"]
 
 TOP_NAME = "kfpga_top"
 
@@ -40,6 +40,22 @@ FORBIDDEN = ("$display", "$finish", "$stop", "$random", "initial begin", "always
 
 
 _ESCAPED_MODULE = re.compile(r"^module \\(\S+) ", re.MULTILINE)
+
+
+def finish_with_status(indent="            "):
+    """The Verilog that ends a self-checking testbench with its ``failed`` register as the exit
+    status: ``$finish_and_return`` on Icarus, ``$stop`` (a non-zero exit) on Verilator when it
+    failed, ``$finish`` elsewhere (ModelSim's script reads ``failed``)."""
+    return "\n".join([
+        "`ifdef __ICARUS__",
+        f"{indent}$finish_and_return(failed ? 1 : 0);",
+        "`elsif VERILATOR",
+        f"{indent}if (failed) $stop;  // a $stop ends the run with a non-zero exit status",
+        f"{indent}else $finish;",
+        "`else",
+        f"{indent}$finish;",
+        "`endif",
+    ])
 
 
 def figures_only(elaboratable):

@@ -62,6 +62,7 @@ def expected_words(config, variant, top, codes, samples, sensors=1):
 def tb_verilog(*, out_width, samples, conversions, max_cycles, progress, sensors=1):
     """``kfpga_tb.v``: the self-checking testbench (plain Verilog-2001); with ``sensors`` on a
     multiplexer it also checks that conversion k is held with the select at sensor k mod N."""
+    from kfpga.hw.generate import finish_with_status
     from kfpga.hw.top import port_widths
 
     w = out_width
@@ -113,14 +114,7 @@ module {TB_NAME};
             end else
                 $display("PASS: %0d estimates equal to the model, 0 ADS8364 timing violations, %0d conversions",
                          n, conversions);
-`ifdef __ICARUS__
-            $finish_and_return(failed ? 1 : 0);
-`elsif VERILATOR
-            if (failed) $stop;  // a $stop ends the run with a non-zero exit status
-            else $finish;
-`else
-            $finish;
-`endif
+{finish_with_status()}
         end
     endtask
 

@@ -313,6 +313,17 @@ def check_rate(args, config):
         raise UsageError(str(exc)) from None
 
 
+def core_prefix(args, config):
+    """``--prefix`` of ``--core-only`` (default ``kfpga_FILTER``), checked."""
+    from kfpga.flows.coreip import check_prefix
+
+    prefix = args.prefix or f"kfpga_{config.filter}"
+    try:
+        return check_prefix(prefix)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
 def need_hz(config, channels):
     """Updates a second the core must make: the board's rate on every channel; 0 without one (the
     ADC then converts as fast as the core takes its samples: a slower core paces it)."""

@@ -50,7 +50,7 @@ def run(args):
 def _run_core_only(args):
     """``--core-only``: the core alone (:mod:`kfpga.flows.coreip`)."""
     from kfpga.core.paths import atomic_dir, check_output_dir
-    from kfpga.flows.coreip import check_prefix, write_core
+    from kfpga.flows.coreip import write_core
 
     for option, value in (("--pins", args.pins), ("--ratio", args.ratio), ("--channel", args.channel),
                           ("--out-field", args.out_field), ("--prefilter", getattr(args, "prefilter", None))):
@@ -59,11 +59,7 @@ def _run_core_only(args):
     check_output_dir(args.out, option="--out", marker="manifest.json")
     config = common.load_config(args, hardware=True)
     common.warn_precision(config)
-    prefix = args.prefix or f"kfpga_{config.filter}"
-    try:
-        check_prefix(prefix)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
+    prefix = common.core_prefix(args, config)
     common.check_architecture(args, config)
     try:
         config.spec.make_core(config, args.variant, channels=args.channels,

@@ -49,7 +49,7 @@ def _run_core_only(args):
 
     from kfpga.core.paths import atomic_dir, check_output_dir
     from kfpga.core.tools import iverilog_path, simulator_available
-    from kfpga.flows.coreip import check_prefix, write_core
+    from kfpga.flows.coreip import write_core
 
     for option, value in (("--channel", args.channel), ("--input", args.input), ("--glitches", getattr(args, "glitches", None)),
                           ("--prefilter", getattr(args, "prefilter", None))):
@@ -61,11 +61,7 @@ def _run_core_only(args):
         if not ok:
             raise UsageError(f"--run-icarus: {why}")
     config = common.load_config(args, hardware=True)
-    prefix = args.prefix or f"kfpga_{config.filter}"
-    try:
-        check_prefix(prefix)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
+    prefix = common.core_prefix(args, config)
     common.check_architecture(args, config)
     samples = common.check_samples(2000 if args.samples is None else args.samples, kind="simulation")
     seed = common.pick_seed(args.seed)

@@ -31,9 +31,10 @@ import numpy as np
 
 from kfpga import __version__
 from kfpga.core.fixedmodel import FixedModel
-from kfpga.hw.generate import figures_only, to_verilog, write_lint_waivers
+from kfpga.hw.generate import figures_only, finish_with_status, to_verilog, write_lint_waivers
 
-__all__ = ["check_prefix", "interface", "write_core", "write_core_testbench", "core_icarus_command", "VERILOG_KEYWORDS"]
+__all__ = ["check_prefix", "interface", "write_core", "write_core_testbench", "core_icarus_command", "fusesoc_core",
+           "VERILOG_KEYWORDS"]
 
 #: Verilog-2001 reserved words: a prefix must not be one.
 VERILOG_KEYWORDS = frozenset((
@@ -359,14 +360,7 @@ module {tb};
                 $display("PASS: {prefix}: %0d estimates equal to the model, one per sample", got);
             done = 1'b1;
             if (STANDALONE != 0) begin
-`ifdef __ICARUS__
-                $finish_and_return(failed ? 1 : 0);
-`elsif VERILATOR
-                if (failed) $stop;  // a $stop ends the run with a non-zero exit status
-                else $finish;
-`else
-                $finish;
-`endif
+{finish_with_status("                ")}
             end
         end
     endtask
@@ -417,39 +411,42 @@ endmodule
 """
 
 
-def _fusesoc(prefix, config, manifest, tb):
-    tbdir = "tb"
-    data = "\n".join(f"      - {tbdir}/{name}: {{file_type: user, copyto: {name}}}"
-                     for name in (f"{prefix}_stimulus.hex", f"{prefix}_expected.hex"))
+def fusesoc_core(*, vlnv, comments, description, rtl, top, tb, tb_top, data, filesets="", targets=""):
+    """A FuseSoC core file (CAPI2): the ``rtl`` fileset and its ``default`` target with ``top``, and a
+    ``sim`` target running the testbench (``tb`` Verilog files, ``data`` files copied beside it,
+    top ``tb_top``) on Icarus (default) or Verilator; ``filesets`` and ``targets`` add YAML of
+    their own (the board's constraints and Quartus target)."""
+    def listing(files, copy=False):
+        return "\n".join(f"      - {f}: {{file_type: user, copyto: {Path(f).name}}}" if copy else f"      - {f}"
+                         for f in files)
+
+    header = "\n".join(f"# {line}" for line in comments)
     return f"""CAPI=2:
-# FuseSoC core file of the {config.filter} core {prefix} (kfpga {__version__}).
-#   fusesoc --cores-root . run --target sim kfpga:cores:{prefix}               (Icarus)
-#   fusesoc --cores-root . run --target sim --tool verilator kfpga:cores:{prefix}
-name: kfpga:cores:{prefix}:1.0.0
-description: "{config.filter} filter, {manifest['variant']} core, {manifest['channels']} channel(s), \
-latency {manifest['latency_cycles']} cycles"
+{header}
+name: {vlnv}
+description: "{description}"
 
 filesets:
   rtl:
     files:
-      - {prefix}.v
+{listing(rtl)}
     file_type: verilogSource
-  tb:
+{filesets}  tb:
     files:
-      - {tbdir}/{prefix}_tb.v
+{listing(tb)}
     file_type: verilogSource
   tbdata:
     files:
-{data}
+{listing(data, copy=True)}
 
 targets:
   default:
     filesets: [rtl]
-    toplevel: {prefix}
-  sim:
+    toplevel: {top}
+{targets}  sim:
     default_tool: icarus
     filesets: [rtl, tb, tbdata]
-    toplevel: {prefix}_tb
+    toplevel: {tb_top}
     tools:
       icarus:
         iverilog_options: [-g2001]
@@ -457,3 +454,16 @@ targets:
         mode: binary
         verilator_options: [--timing, -CFLAGS, -fcoroutines, -Wno-fatal, -Wno-lint, -Wno-style]
 """
+
+
+def _fusesoc(prefix, config, manifest, tb):
+    vlnv = f"kfpga:cores:{prefix}"
+    return fusesoc_core(
+        vlnv=f"{vlnv}:1.0.0",
+        comments=[f"FuseSoC core file of the {config.filter} core {prefix} (kfpga {__version__}).",
+                  f"  fusesoc --cores-root . run --target sim {vlnv}               (Icarus)",
+                  f"  fusesoc --cores-root . run --target sim --tool verilator {vlnv}"],
+        description=f"{config.filter} filter, {manifest['variant']} core, {manifest['channels']} channel(s), "
+                    f"latency {manifest['latency_cycles']} cycles",
+        rtl=[f"{prefix}.v"], top=prefix, tb=[f"tb/{prefix}_tb.v"], tb_top=f"{prefix}_tb",
+        data=[f"tb/{prefix}_stimulus.hex", f"tb/{prefix}_expected.hex"])

@@ -321,37 +321,24 @@ def board_fusesoc(config, verilog):
     """``kfpga_top.core``: FuseSoC (CAPI2) for the board's design: the RTL, a ``synth`` target for
     Quartus with the device, the .sdc and the pins, and a ``sim`` target running the
     self-checking testbench of ``tb/`` on Icarus (default) or Verilator."""
-    tb = "\n".join(f"      - tb/{name}" for name in BOARD_TB_FILES)
-    data = "\n".join(f"      - tb/{name}: {{file_type: user, copyto: {name}}}" for name in BOARD_TB_DATA)
-    return f"""CAPI=2:
-# FuseSoC core file of the board's design (kfpga {__version__}): {config.filter} filter on the {DEVICE_ORDERING}.
-#   fusesoc --cores-root . run --target synth kfpga:board:{TOP_NAME}     (Quartus II)
-#   fusesoc --cores-root . run --target sim kfpga:board:{TOP_NAME}       (Icarus; --tool verilator)
-name: kfpga:board:{TOP_NAME}:1.0.0
-description: "{config.filter} filter, ADS8364 controller and clock divider for the {DEVICE_ORDERING}"
+    from kfpga.flows.coreip import fusesoc_core
 
-filesets:
-  rtl:
-    files:
-      - {verilog}
-    file_type: verilogSource
-  constraints:
+    vlnv = f"kfpga:board:{TOP_NAME}"
+    return fusesoc_core(
+        vlnv=f"{vlnv}:1.0.0",
+        comments=[f"FuseSoC core file of the board's design (kfpga {__version__}): {config.filter} filter on the "
+                  f"{DEVICE_ORDERING}.",
+                  f"  fusesoc --cores-root . run --target synth {vlnv}     (Quartus II)",
+                  f"  fusesoc --cores-root . run --target sim {vlnv}       (Icarus; --tool verilator)"],
+        description=f"{config.filter} filter, ADS8364 controller and clock divider for the {DEVICE_ORDERING}",
+        rtl=[verilog], top=TOP_NAME, tb=[f"tb/{name}" for name in BOARD_TB_FILES], tb_top="kfpga_tb",
+        data=[f"tb/{name}" for name in BOARD_TB_DATA],
+        filesets=f"""  constraints:
     files:
       - {TOP_NAME}.sdc: {{file_type: SDC}}
       - {TOP_NAME}_pins.tcl: {{file_type: tclSource}}
-  tb:
-    files:
-{tb}
-    file_type: verilogSource
-  tbdata:
-    files:
-{data}
-
-targets:
-  default:
-    filesets: [rtl]
-    toplevel: {TOP_NAME}
-  synth:
+""",
+        targets=f"""  synth:
     default_tool: quartus
     filesets: [rtl, constraints]
     toplevel: {TOP_NAME}
@@ -359,17 +346,7 @@ targets:
       quartus:
         family: {FAMILY}
         device: {DEVICE}
-  sim:
-    default_tool: icarus
-    filesets: [rtl, tb, tbdata]
-    toplevel: kfpga_tb
-    tools:
-      icarus:
-        iverilog_options: [-g2001]
-      verilator:
-        mode: binary
-        verilator_options: [--timing, -CFLAGS, -fcoroutines, -Wno-fatal, -Wno-lint, -Wno-style]
-"""
+""")
 
 
 def _jsonable(value):
