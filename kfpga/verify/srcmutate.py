@@ -11,8 +11,8 @@ source that builds it, the kind of slip a person makes:
 * the condition of an ``m.If`` / ``m.Elif`` inverted.
 
 Only lines of *RTL-building code* are mutated: every function and constant table of ``hw/*.py`` but the tools
-that write files and estimate (:data:`NOT_RTL`: ``generate.py``, ``resources.py``,
-``timing.py``), never a docstring, a message or an argument check (an ``if`` that only raises).
+that write files and estimate and the core factory (:data:`NOT_RTL`: ``generate.py``,
+``resources.py``, ``timing.py``, ``ip.py``), never a docstring, a message or an argument check (an ``if`` that only raises).
 Sites are drawn with a seeded generator, ``--mutants`` per file.
 
 Each mutant runs the tests that execute its line: a first pass runs the fast tests of the
@@ -59,8 +59,8 @@ POOL_MARKS = "not cosim and not slow"
 #: The files copied into the tree the mutants are written to.
 TREE = ("kfpga", "hw", "model", "sim", "constraints", "tests", "pyproject.toml")
 #: The files of ``hw/`` that build no logic: the Verilog and project writer, the synthesis and
-#: timing estimates.
-NOT_RTL = ("hw/generate.py", "hw/resources.py", "hw/timing.py", "hw/__init__.py")
+#: timing estimates, and the core factory for Amaranth users.
+NOT_RTL = ("hw/generate.py", "hw/resources.py", "hw/timing.py", "hw/ip.py", "hw/__init__.py")
 
 
 @dataclass
