@@ -78,10 +78,12 @@ def read_table(path, *, single="y", unnamed=False):
         raise InputError(f"{path}: the file is empty (expected a header line and one row per sample)")
     first = lines[0][1]
     separator = max(SEPARATORS, key=lambda sep: (first.count(sep), -SEPARATORS.index(sep)))
-    try:
-        cells = list(csv.reader([line for _, line in lines], delimiter=separator))
-    except csv.Error as exc:
-        raise InputError(f"{path}: not readable as CSV ({exc})") from None
+    cells = []
+    for n, line in lines:  # a line is a row: a quote left open does not swallow the lines after it
+        try:
+            cells.append(next(csv.reader([line], delimiter=separator), []))
+        except csv.Error as exc:
+            raise InputError(f"{path}: line {n}: not readable as CSV ({exc})") from None
     names = [h.strip() for h in cells[0]]
     header = not all(_is_number(name) for name in names)
     if not header and unnamed:
