@@ -435,7 +435,7 @@ def main(argv=None):
         epilog="example: python -m kfpga.verify.srcmutate --mutants 3 --seed 1 --only sqrt")
     parser.add_argument("--mutants", type=int, default=3, help="mutants per file (default 3)")
     parser.add_argument("--seed", type=int, default=1, help="seed of the sites' draw (default 1)")
-    parser.add_argument("--only", metavar="TEXT", help="the files whose name contains TEXT")
+    parser.add_argument("--only", metavar="TEXT", help="the files whose name contains TEXT (several: a,b,c)")
     parser.add_argument("--tests", nargs="+", metavar="FILE", default=POOL,
                         help="the test files that map lines to tests (default: the Amaranth-simulator tests of hw/)")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -448,7 +448,8 @@ def main(argv=None):
     here = Path.cwd()
     files = sorted(p.relative_to(here).as_posix() for p in (here / "hw").glob("*.py"))
     files = [f for f in files if f not in NOT_RTL]
-    files = [f for f in files if not args.only or args.only.lower() in f.lower()]
+    wanted = [t.strip().lower() for t in (args.only or "").split(",") if t.strip()]
+    files = [f for f in files if not wanted or any(t in f.lower() for t in wanted)]
     if not files:
         parser.exit(2, f"{parser.prog}: error: no file of hw/ matches --only {args.only!r}\n")
 
