@@ -82,17 +82,29 @@ def _run_core_only(args):
         path = f"{Path(iverilog_path()).parent}{os.pathsep}{os.environ.get('PATH', '')}"  # vvp beside iverilog
         done = subprocess.run(["sh", "run_icarus.sh"], cwd=tb, capture_output=True, text=True,
                               env={**os.environ, "PATH": path})
-        lines = [ln for ln in (done.stdout + done.stderr).splitlines() if ln.startswith(("PASS", "FAIL"))]
-        result.update({"icarus_exit": done.returncode,
-                       "icarus_result": lines[-1] if lines else (done.stdout + done.stderr).strip()[-300:]})
+        result.update(_icarus(done.returncode, done.stdout + done.stderr))
+    head = (f"kfpga testbench: {config.filter} filter, core {prefix} alone ({manifest['architecture']}, "
+            f"{args.channels} channel state(s)), {samples} estimates, in {args.out}/")
+    return _report(args, result, head, [f"  Icarus:           {args.out}/tb/run_icarus.sh",
+                                        f"  ModelSim-Altera:  cd {args.out}/tb && vsim -c -do run_modelsim.do",
+                                        f"  FuseSoC:          cd {args.out} && fusesoc --cores-root . run --target sim "
+                                        f"kfpga:cores:{prefix}"])
+
+
+def _icarus(code, text):
+    """The Icarus run's exit status and its PASS or FAIL line (or the end of its output)."""
+    lines = [ln for ln in text.splitlines() if ln.startswith(("PASS", "FAIL"))]
+    return {"icarus_exit": code, "icarus_result": lines[-1] if lines else text.strip()[-300:]}
+
+
+def _report(args, result, head, lines):
+    """Print (or ``--json``) what was written and the Icarus run; the exit status."""
     if args.json:
         common.emit_json(result)
     else:
-        print(f"kfpga testbench: {config.filter} filter, core {prefix} alone ({manifest['architecture']}, "
-              f"{args.channels} channel state(s)), {samples} estimates, in {args.out}/")
-        print(f"  Icarus:           {args.out}/tb/run_icarus.sh")
-        print(f"  ModelSim-Altera:  cd {args.out}/tb && vsim -c -do run_modelsim.do")
-        print(f"  FuseSoC:          cd {args.out} && fusesoc --cores-root . run --target sim kfpga:cores:{prefix}")
+        print(head)
+        for line in lines:
+            print(line)
         if args.run_icarus:
             print(f"  Icarus run: {result['icarus_result']} (exit {result['icarus_exit']})")
     return 0 if not args.run_icarus or result["icarus_exit"] == 0 else 1
@@ -126,17 +138,9 @@ def _run_board(args):
     result = {**info, "out": str(out)}
     if args.run_icarus:
         common.info("running it on Icarus ...")
-        code, text = run_icarus(out)
-        lines = [ln for ln in text.splitlines() if ln.startswith(("PASS", "FAIL"))]
-        result.update({"icarus_exit": code, "icarus_result": lines[-1] if lines else text.strip()[-300:]})
-    if args.json:
-        common.emit_json(result)
-    else:
-        print(f"kfpga testbench: {info['filter']} filter, {info['variant']} core, {info['channels']}, "
-              f"{info['samples']} estimates, in {out}/")
-        print(f"  files: {', '.join(info['files'])}")
-        print(f"  ModelSim-Altera:  cd {out} && vsim -c -do run_modelsim.do")
-        print(f"  Icarus:           {out}/run_icarus.sh")
-        if args.run_icarus:
-            print(f"  Icarus run: {result['icarus_result']} (exit {result['icarus_exit']})")
-    return 0 if not args.run_icarus or result["icarus_exit"] == 0 else 1
+        result.update(_icarus(*run_icarus(out)))
+    head = (f"kfpga testbench: {info['filter']} filter, {info['variant']} core, {info['channels']}, "
+            f"{info['samples']} estimates, in {out}/")
+    return _report(args, result, head, [f"  files: {', '.join(info['files'])}",
+                                        f"  ModelSim-Altera:  cd {out} && vsim -c -do run_modelsim.do",
+                                        f"  Icarus:           {out}/run_icarus.sh"])
