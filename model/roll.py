@@ -96,9 +96,10 @@ class RollParams:
         object.__setattr__(self, "P0", p0)
 
 
-def transition(T):
-    """The constant-acceleration transition over ``T`` (the paper's A with its bottom-right 1)."""
-    return np.array([[1.0, T, T * T / 2.0], [0.0, 1.0, T], [0.0, 0.0, 1.0]])
+def transition(T, *, a33=1.0):
+    """The constant-acceleration transition over ``T`` (the paper's A with its bottom-right 1);
+    ``a33``: another bottom-right entry (eq. (22) prints T there)."""
+    return np.array([[1.0, T, T * T / 2.0], [0.0, 1.0, T], [0.0, 0.0, a33]])
 
 
 def _start(z, step):
@@ -113,11 +114,13 @@ def _cholesky(p, what):
         raise ValueError(f"{what} is not positive definite: the square-root form needs its Cholesky factor") from None
 
 
-def _filter(z, params, *, improved, sqrt, fading):
+def _filter(z, params, *, improved, sqrt, fading, printed=False):
     """One filter over its own samples ``z``: ``(predictions, covariances)``; prediction k (from
     sample k on, for sample k + 1) is NaN for the three samples that start it."""
     step = 2.0 * params.T
-    a = transition(step)
+    # eq. (22) prints T, the sample period, in the bottom-right corner: the acceleration then
+    # shrinks by T each step (with T the filter's own 1 s step the printed A would be the model's)
+    a = transition(step, a33=params.T if printed else 1.0)
     h = np.array([1.0, 0.0, 0.0])
     q = params.q * np.eye(3)
     n = len(z)
@@ -166,11 +169,13 @@ def _filter(z, params, *, improved, sqrt, fading):
     return out, covs
 
 
-def predict(z, params=None, *, improved=True, sqrt=True, fading=True):
+def predict(z, params=None, *, improved=True, sqrt=True, fading=True, printed_a=False):
     """The combined interval predictor over the roll series ``z`` (deg, every ``T``): an array
     ``p`` where ``p[n]`` is the prediction, made when sample n came, of sample n + 2 (1 s later
     at T = 0.5 s); NaN where a filter is still starting. ``improved=False`` is the paper's basic
-    form (``sqrt`` and ``fading`` then do not apply). Raises ``ValueError`` for fewer than
+    form (``sqrt`` and ``fading`` then do not apply). ``printed_a``: the transition as eq. (22)
+    prints it, the sample period T in its bottom-right corner (float only; the core has the
+    model's A). Raises ``ValueError`` for fewer than
     :data:`MIN_SAMPLES` samples."""
     params = RollParams() if params is None else params
     z = np.asarray(z, dtype=np.float64)
@@ -183,7 +188,8 @@ def predict(z, params=None, *, improved=True, sqrt=True, fading=True):
         raise ValueError("sqrt and fading are options of the improved form")
     out = np.full(len(z), np.nan)
     for parity in (0, 1):
-        part, _ = _filter(z[parity::2], params, improved=improved, sqrt=sqrt and improved, fading=fading and improved)
+        part, _ = _filter(z[parity::2], params, improved=improved, sqrt=sqrt and improved, fading=fading and improved,
+                          printed=printed_a)
         out[parity::2] = part
     return out
 

@@ -308,6 +308,7 @@ def test_evaluate_alpha_beta_cli(tmp_path, capsys, seed):
     out = json.loads(capsys.readouterr().out)
     rows = {r["filter"]: r for r in out["rows"]}
     raw, paper = rows["raw plots"], rows["alpha-beta (paper)"]
+    # every recursive filter starts a track from its first two plots: no start-up transient
     kalman = rows["Kalman (time-varying gain)"]
     # the filters smooth the plots; the Kalman filter, optimal for this noise, beats every fixed gain
     assert paper["position_rmse"] < raw["position_rmse"]
@@ -316,7 +317,8 @@ def test_evaluate_alpha_beta_cli(tmp_path, capsys, seed):
     for r in out["rows"]:
         if "bit_accurate_position_rmse" in r:
             assert abs(r["bit_accurate_position_rmse"] / r["position_rmse"] - 1) < 0.02, r
-    assert out["scenario"]["targets"] == 3 and len(out["findings"]) == 4
+    assert out["scenario"]["targets"] == 3 and out["seeds"] == [seed % 1000]
+    assert len(out["claims"]) >= 3 and all(c["runs"] in (0, 1) for c in out["claims"])
     assert plot.stat().st_size > 10000
 
 

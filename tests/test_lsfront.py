@@ -66,12 +66,15 @@ def test_evaluate_ls_frontend_cli(tmp_path, capsys, seed):
     result = json.loads(capsys.readouterr().out)
     assert plot.stat().st_size > 10000
     rows = {r["filter"]: r for r in result["rows"]}
-    fed, vonly = rows["LS-fed Kalman (the patent)"], rows["Kalman, velocity only"]
+    fed, vonly = rows["LS-fed Kalman (the patent, x0)"], rows["Kalman, velocity only (x2)"]
+    equal = rows["Kalman, velocity only, equal suppression"]
     mean = rows["moving average (10 samples)"]
     raw = rows["speed log (raw)"]
-    assert fed["rmse_cruise"] < vonly["rmse_cruise"] < raw["rmse_cruise"]  # the patent's noise suppression
-    assert abs(fed["lag_s"]) < mean["lag_s"]  # and a smaller lag than the moving average's
-    assert sum(result["windows"].values()) == result["scenario"]["seconds"] and len(result["findings"]) == 5
+    assert max(fed["rmse_cruise"], vonly["rmse_cruise"]) < raw["rmse_cruise"]
+    assert abs(fed["lag_s"]) < mean["lag_s"]  # a smaller lag than the moving average's (every seed of 20)
+    # the baseline at equal noise suppression: its q found by bisection matches x0's RMSE at constant speed
+    assert equal["rmse_cruise"] == pytest.approx(fed["rmse_cruise"], rel=1e-3)
+    assert sum(result["windows"].values()) == result["scenario"]["seconds"] and len(result["claims"]) == 6
 
 
 # -- the bit-accurate front end --------------------------------------------------------------------

@@ -18,6 +18,7 @@ import pytest
 
 from kfpga.cli import main
 from kfpga.core import registry
+from kfpga.core.claims import Claim, spread
 from kfpga.core.formats import register_formats
 from kfpga.core.params import number
 from kfpga.core.spec import Constant, Evaluation, FilterSpec, Output, Point, Variant
@@ -127,13 +128,16 @@ def _toy_run(options, seed):
     y = np.round(1000 + rng.normal(0, 20, 2000))
     x = toy_reference(ToyParams(), "steady", y)["x"]
     noise = float(np.std(x[200:] - 1000) / 20)
-    return {"seed": seed, "noise_ratio": noise,
-            "claims": [{"claim": "smoothing reduces the noise", "document": "< 1", "ours": noise,
-                        "verdict": "reproduced" if noise < 1 else "not reproduced"}]}
+    return {"seed": seed, "noise_ratio": noise}
+
+
+def _toy_claims(options, result, runs):
+    ratios = [run["noise_ratio"] for run in runs]
+    return [Claim("smoothing reduces the noise", "< 1", [r < 1 for r in ratios], spread(ratios))]
 
 
 TOY_EVALUATION = Evaluation(summary="a toy evaluation", description="Smooths a noisy constant.",
-                            add_arguments=lambda p: None, run=_toy_run,
+                            add_arguments=lambda p: None, run=_toy_run, claims=_toy_claims,
                             table=lambda r: f"noise ratio {r['noise_ratio']:.3f}", summary_json=lambda r: r)
 
 TOY = FilterSpec(
@@ -184,9 +188,9 @@ def test_a_toy_filter_gets_the_generic_commands(toy, tmp_path, capsys, seed):
     assert main(["generate", "--filter", "toy", "--out", str(tmp_path / "gen"), "--quiet"]) == 0
     assert (tmp_path / "gen" / "kfpga_top.v").exists()
     capsys.readouterr()
-    assert main(["evaluate", "toy", "--seed", str(seed), "--json"]) == 0
+    assert main(["evaluate", "toy", "--seed", str(seed), "--seeds", "3", "--json"]) == 0
     claims = json.loads(capsys.readouterr().out)["claims"]
-    assert claims[0]["verdict"] == "reproduced"
+    assert claims[0]["verdict"] == "reproduced" and claims[0]["runs"] == 3
 
 
 def test_a_toy_filter_passes_the_contract(toy, tmp_path, seed):

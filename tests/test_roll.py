@@ -98,7 +98,11 @@ def test_evaluate_roll_cli(tmp_path, capsys, seed):
     table = {form: r["rmse_deg"] for (data, form), r in rows.items() if data.startswith("table 1")}
     basic, improved = table["basic (predict, then update)"], table["improved: + square root (the paper's)"]
     assert improved < 0.2 < basic  # the paper's direction, and its requirement, on its own 32 samples
-    assert len(result["sweep"]) == 20 and len(result["findings"]) == 6
+    assert len(result["sweep"]) == 20 and len(result["claims"]) == 9
+    # fixed point and float on the same ADC codes, from the same start, over the same predictions
+    for r in result["fixed"]:
+        assert r["predictions"] == (26 if r["data"].startswith("table 1") else 474)
+        assert r["max_from_float_deg"] < 0.001
 
 
 def test_evaluate_roll_cli_errors(tmp_path, capsys):
@@ -106,8 +110,12 @@ def test_evaluate_roll_cli_errors(tmp_path, capsys):
     bad.write_text("roll\n1\n2\nx\n")
     for argv, message in ((["--input", str(bad)], "line 4: roll = 'x' is not a number"),
                           (["--samples", "5"], "--samples must be at least 8"),
-                          (["--fading", "-1"], "--fading: s must be > 0"),
-                          (["--input", str(bad), "--seed", "1"], "--seed does not apply here")):
+                          (["--fading", "-1"], "--fading/--q/--r/--p0: s must be > 0"),
+                          (["--input", str(bad), "--seed", "1"], "--seed does not apply here"),
+                          (["--input", str(bad), "--seeds", "3"], "--seeds does not apply here"),
+                          (["--input", str(bad), "--noise", "0.1"], "--noise does not apply with --input"),
+                          (["--p0", "x"], "--p0 must be a number (every entry) or diag:V, not 'x'"),
+                          (["--q", "0"], "--fading/--q/--r/--p0: q must be > 0")):
         assert main(["evaluate", "roll", *argv]) == 2
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1

@@ -160,6 +160,14 @@ class Evaluation:
         ``table(result) -> str``: the report.
     summary_json:
         ``summary_json(result) -> dict``: what ``--json`` prints.
+    claims:
+        ``claims(options, result, measures) -> [Claim]``: every quantitative claim of the source
+        document (:class:`~kfpga.core.claims.Claim`), judged on ``measures``, one per seed of the
+        run (``result`` is the full run of the first seed); the command prints them and writes
+        them under ``claims`` in ``--json``.
+    measure:
+        ``measure(options, seed) -> dict``: what the claims need from one seed, cheaper than a full
+        ``run`` (the command calls it for every seed); ``None``: ``run`` itself.
     plot:
         ``plot(result, path)``: its figures; ``None`` if it has none.
     seeded:
@@ -176,6 +184,8 @@ class Evaluation:
     run: Callable
     table: Callable
     summary_json: Callable
+    claims: Callable
+    measure: Callable | None = None
     plot: Callable | None = None
     seeded: Callable = field(default=lambda options: True)
     check: Callable = field(default=lambda options: None)

@@ -53,8 +53,44 @@ def deceleration_log(s, seed):
     return t, truth, truth + rng.normal(0, s.sigma_v, len(t)), accel + rng.normal(0, s.sigma_a, len(t))
 
 
+def _figures(name, est, truth, t, s):
+    """One curve's noise suppression and responsiveness (see :class:`DecelerationScenario`)."""
+    cruise = (t >= 50) & (t < s.t0)
+    ramp = (t >= s.t0 + 20) & (t < s.t_stop - 10)
+    stopped = t >= s.t_stop + 100
+    e = est - truth
+    mean_e = np.convolve(e, np.ones(s.average) / s.average, mode="same")
+    below = np.flatnonzero((t >= s.t0) & (est <= s.v0 - s.drop))
+    onset = float(t[below[0]] - (s.t0 + s.drop / s.decel)) if below.size else None
+    after = (t >= s.t_stop) & (t < s.t_stop + 100)
+    return {"filter": name, "rmse_cruise": float(np.sqrt(np.mean(e[cruise] ** 2))),
+            "rmse_stopped": float(np.sqrt(np.mean(e[stopped] ** 2))),
+            "rmse_ramp": float(np.sqrt(np.mean(e[ramp] ** 2))), "onset_delay_s": onset,
+            "lag_s": float(np.mean(e[ramp]) / s.decel), "undershoot": float(max(0.0, -np.min(mean_e[after])))}
+
+
+def equal_suppression_q(v, truth, t, s, params, target):
+    """The q of the velocity-only filter whose RMSE at constant speed equals ``target`` (the
+    LS-fed filter's), by bisection on log q: the baseline at the same noise suppression."""
+    from dataclasses import replace
+
+    from kfpga.model import lsfront as ls
+
+    def cruise(q):
+        return _figures("", ls.kalman_va(v, replace(params, q=q))["velocity"], truth, t, s)["rmse_cruise"]
+
+    lo, hi = -14.0, -1.0  # log10 q: the RMSE rises with q
+    for _ in range(30):
+        mid = (lo + hi) / 2.0
+        lo, hi = (mid, hi) if cruise(10.0 ** mid) < target else (lo, mid)
+    return 10.0 ** ((lo + hi) / 2.0)
+
+
 def ls_frontend(scenario=None, *, seed, params=None):
-    """The patent's four curves on the deceleration scenario: ``{seed, scenario, params, rows, series}``."""
+    """The patent's four curves on the deceleration scenario, and the velocity-only filter at the
+    LS-fed one's noise suppression: ``{seed, scenario, params, rows, series, ...}``."""
+    from dataclasses import replace
+
     from kfpga.model import lsfront as ls
 
     s = DecelerationScenario() if scenario is None else scenario
@@ -62,40 +98,34 @@ def ls_frontend(scenario=None, *, seed, params=None):
     t, truth, v, a = deceleration_log(s, seed)
     fed = ls.lsfront(v, params)
     fixed = ls_frontend_fixed(v, params)
+    fed_cruise = _figures("", fed["velocity"], truth, t, s)["rmse_cruise"]
+    q_equal = equal_suppression_q(v, truth, t, s, params, fed_cruise)
+    both = ls.kalman_va(v, params, a=a, r_a=s.sigma_a ** 2)["velocity"]
     curves = {
-        "LS-fed Kalman (the patent)": fed["velocity"],
-        "Kalman, velocity and acceleration observed": ls.kalman_va(v, params, a=a, r_a=s.sigma_a ** 2)["velocity"],
-        "Kalman, velocity only": ls.kalman_va(v, params)["velocity"],
+        FED: fed["velocity"],
+        BOTH: both,
+        VONLY: ls.kalman_va(v, params)["velocity"],
+        VONLY_EQUAL: ls.kalman_va(v, replace(params, q=q_equal))["velocity"],
         f"moving average ({s.window} samples)": ls.moving_average(v, s.window),
         SWITCHED: fixed.pop("float"),
         BIT_ACCURATE: fixed.pop("fixed"),
     }
-    cruise = (t >= 50) & (t < s.t0)
-    ramp = (t >= s.t0 + 20) & (t < s.t_stop - 10)
-    stopped = t >= s.t_stop + 100
-    rows = []
-    for name, est in curves.items():
-        e = est - truth
-        mean_e = np.convolve(e, np.ones(s.average) / s.average, mode="same")
-        below = np.flatnonzero((t >= s.t0) & (est <= s.v0 - s.drop))
-        onset = float(t[below[0]] - (s.t0 + s.drop / s.decel)) if below.size else None
-        after = (t >= s.t_stop) & (t < s.t_stop + 100)
-        rows.append({"filter": name, "rmse_cruise": float(np.sqrt(np.mean(e[cruise] ** 2))),
-                     "rmse_stopped": float(np.sqrt(np.mean(e[stopped] ** 2))),
-                     "rmse_ramp": float(np.sqrt(np.mean(e[ramp] ** 2))), "onset_delay_s": onset,
-                     "lag_s": float(np.mean(e[ramp]) / s.decel),
-                     "undershoot": float(max(0.0, -np.min(mean_e[after])))})
-    rows.insert(0, {"filter": "speed log (raw)", "rmse_cruise": float(np.sqrt(np.mean((v - truth)[cruise] ** 2))),
-                    "rmse_stopped": float(np.sqrt(np.mean((v - truth)[stopped] ** 2))),
-                    "rmse_ramp": float(np.sqrt(np.mean((v - truth)[ramp] ** 2))), "onset_delay_s": None, "lag_s": None,
-                    "undershoot": None})
+    rows = [{**_figures("speed log (raw)", v, truth, t, s), "onset_delay_s": None, "lag_s": None, "undershoot": None}]
+    rows += [_figures(name, est, truth, t, s) | {"from_both": float(np.sqrt(np.mean((est - both)[t >= s.t0 - 50] ** 2)))}
+             for name, est in curves.items()]
     windows = np.bincount(fed["Ns"], minlength=max(params.windows) + 1)
     return {"seed": seed, "scenario": {k: getattr(s, k) for k in s.__dataclass_fields__},
-            "params": {"T": params.T, "q": params.q, "r": params.r, "table": [list(r) for r in params.table]},
-            "rows": rows, "windows": {int(n): int(c) for n, c in enumerate(windows) if c}, "fixed": fixed,
+            "params": {"T": params.T, "q": params.q, "r": params.r, "table": [list(r) for r in params.table],
+                       "q_equal_suppression": q_equal},
+            "rows": rows, "windows": {int(n): int(c) for n, c in enumerate(windows) if c},
+            "mean_window": float(np.mean(fed["Ns"])), "fixed": fixed,
             "series": {"t": t, "truth": truth, "raw": v, **curves, "Ns": fed["Ns"]}}
 
 
+FED = "LS-fed Kalman (the patent, x0)"
+BOTH = "Kalman, velocity and acceleration observed (x1)"
+VONLY = "Kalman, velocity only (x2)"
+VONLY_EQUAL = "Kalman, velocity only, equal suppression"
 #: The rows of the front end's fixed-point form: in float, and in the core's integers.
 SWITCHED = "LS-fed, a steady-state gain per mode (float)"
 BIT_ACCURATE = "LS-fed, bit-accurate (the core's integers)"
@@ -144,8 +174,10 @@ def ls_frontend_table(result):
               f"deceleration; onset: how much later than the truth the estimate is {s['drop']:g} m/s below the cruise "
               f"speed; lag: the mean error in the ramp over the deceleration; undershoot: below zero after the stop, the "
               f"error averaged over {s['average']} samples (m/s). Samples per window Ns (0: raw velocity, m = 1): {used}",
+              f"velocity only, equal suppression: q = {result['params']['q_equal_suppression']:.3g} (the patent's filter's "
+              f"q = {result['params']['q']:g}), chosen so that its RMSE at constant speed equals the LS-fed filter's.",
               "", ls_frontend_fixed_text(result["fixed"]), "",
-              "against the patent:"] + [f"  {line}" for line in ls_frontend_findings(result)]
+              "the patent gives curves, not figures; the scenario's numbers (speed, rate, noise) are this code's own."]
     return "\n".join(lines)
 
 
@@ -160,39 +192,70 @@ def ls_frontend_fixed_text(fixed):
             f"{fixed['samples']} samples. Its steady-state gains (velocity, acceleration per sample) per mode: {gains}.")
 
 
-def ls_frontend_findings(result):
-    rows = {r["filter"]: r for r in result["rows"]}
-    fed = rows["LS-fed Kalman (the patent)"]
-    both = rows["Kalman, velocity and acceleration observed"]
-    vonly = rows["Kalman, velocity only"]
-    mean = next(r for n, r in rows.items() if n.startswith("moving average"))
-    sw = rows[SWITCHED]
-    quiet = fed["rmse_cruise"] < min(vonly["rmse_cruise"], mean["rmse_cruise"])
-    quick = abs(fed["lag_s"]) < abs(mean["lag_s"])
-    at_changes = fed["onset_delay_s"] <= vonly["onset_delay_s"] and fed["undershoot"] <= vonly["undershoot"]
-    verdict = ("confirmed" if quick and at_changes else
-               "in the ramp, against the moving average, confirmed; at the changes not: the long window's slope keeps the "
-               "old acceleration, and R trusts it" if quick else "not confirmed")
+def ls_frontend_claims(options, result, runs):
+    """The patent's claims, judged on every seed (and, for the window, over three noise levels)."""
+    from kfpga.core.claims import Claim, spread
+
+    def fig(name, key):
+        return [next(r for r in run["rows"] if r["filter"].startswith(name))[key] for run in runs]
+
+    mean = "moving average"
+    fed = {k: fig(FED, k) for k in ("rmse_cruise", "rmse_stopped", "onset_delay_s", "lag_s", "undershoot", "from_both")}
+    vo = {k: fig(VONLY, k) for k in ("rmse_cruise", "onset_delay_s", "lag_s", "undershoot", "from_both")}
+    eq = {k: fig(VONLY_EQUAL, k) for k in ("rmse_cruise", "onset_delay_s", "lag_s", "undershoot")}
+    ma = {k: fig(mean, k) for k in ("rmse_cruise", "lag_s")}
+
+    def quicker(other):
+        return [f_on <= o_on and abs(f_lag) <= abs(o_lag) and f_un <= o_un for f_on, o_on, f_lag, o_lag, f_un, o_un in
+                zip(fed["onset_delay_s"], other["onset_delay_s"], fed["lag_s"], other["lag_s"], fed["undershoot"],
+                    other["undershoot"], strict=True)]
+
+    def resp(d):
+        return (f"onset {spread(d['onset_delay_s'], '.3g')} s, lag {spread(d['lag_s'], '.3g')} s, undershoot "
+                f"{spread(d['undershoot'], '.3g')} m/s")
+
+    noise = [run.get("window_by_noise") for run in runs]
     return [
-        f"high noise suppression (its claim): at constant speed {fed['rmse_cruise']:.4f} m/s against "
-        f"{vonly['rmse_cruise']:.4f} (velocity only) and {mean['rmse_cruise']:.4f} (moving average): "
-        + ("confirmed" if quiet else "not confirmed") + "; stopped "
-        f"{fed['rmse_stopped']:.4f} against {vonly['rmse_stopped']:.4f} and {mean['rmse_stopped']:.4f}.",
-        f"high responsiveness: a lag of {fed['lag_s']:.2f} s in the deceleration against the moving average's "
-        f"{mean['lag_s']:.2f} s; the onset seen "
-        f"{fed['onset_delay_s']:.0f} s after the truth (velocity only {vonly['onset_delay_s']:.0f} s, moving average "
-        f"{mean['onset_delay_s']:.0f} s); after the stop it undershoots by {fed['undershoot']:.3f} m/s (velocity only "
-        f"{vonly['undershoot']:.3f}, both observed {both['undershoot']:.3f}): " + verdict + ".",
-        f"close to the filter that observes both (its fig. 4, curve x1): RMSE in the ramp {fed['rmse_ramp']:.4f} against "
-        f"{both['rmse_ramp']:.4f} m/s, at constant speed {fed['rmse_cruise']:.4f} against {both['rmse_cruise']:.4f}; "
-        "without an accelerometer.",
-        f"its fixed-point form (a steady-state gain for each mode, switched as the window changes): in float, RMSE "
-        f"{sw['rmse_cruise']:.4f} m/s at constant speed and {sw['rmse_ramp']:.4f} in the ramp, an undershoot of "
-        f"{sw['undershoot']:.3f} m/s (the patent's time-varying filter: {fed['rmse_cruise']:.4f}, {fed['rmse_ramp']:.4f}, "
-        f"{fed['undershoot']:.3f}); in the core's integers at most {result['fixed']['max_from_float']:.4f} m/s from "
-        "that float filter.",
-        "the patent gives curves, not figures; the scenario's numbers (speed, rate, noise) are this code's own.",
+        Claim("high noise suppression: the LS-fed filter (x0) is quieter at constant speed than the velocity-only "
+              "Kalman filter (x2) and the moving average ([0362], [0402])", "curves (fig. 4), no figure",
+              [f < v and f < m for f, v, m in zip(fed["rmse_cruise"], vo["rmse_cruise"], ma["rmse_cruise"], strict=True)],
+              f"RMSE at constant speed {spread(fed['rmse_cruise'])} m/s against {spread(vo['rmse_cruise'])} (x2) and "
+              f"{spread(ma['rmse_cruise'])} (moving average)"),
+        Claim("x0 responds better than x2, the velocity-only filter (fig. 4, [0373])", "curves (fig. 4)",
+              quicker(vo), f"x0: {resp(fed)}; x2: {resp(vo)}",
+              "held when x0 is no later at the onset, lags no more in the ramp and undershoots no more after the stop"),
+        Claim("... also against x2 at the same noise suppression (its q raised until its RMSE at constant speed "
+              "equals x0's)", "not in the patent: the fair form of the same comparison", quicker(eq),
+              f"x2 at equal suppression: {resp(eq)}"),
+        Claim("x0 approximates x1, the filter that observes velocity and acceleration (fig. 4, [0373])", "curves",
+              [f < v for f, v in zip(fed["from_both"], vo["from_both"], strict=True)],
+              f"RMS distance from x1 from the deceleration on: x0 {spread(fed['from_both'])} m/s, x2 "
+              f"{spread(vo['from_both'])} m/s", "held when x0 is closer to x1 than x2 is"),
+        Claim("the moving average with a similar noise suppression responds worse (x3, [0143])", "curves",
+              [abs(f) < abs(m) for f, m in zip(fed["lag_s"], ma["lag_s"], strict=True)],
+              f"lag in the ramp: x0 {spread(fed['lag_s'], '.3g')} s, moving average {spread(ma['lag_s'], '.3g')} s"),
+        Claim("when the observation noise is large, Ns is large ([0394])", "said, no figure",
+              [n[-1][1] > n[0][1] for n in noise],
+              "mean window Ns at speed-log noise " + ", ".join(
+                  f"{sigma:g} m/s: {spread([n[i][1] for n in noise], '.3g')}" for i, (sigma, _) in enumerate(noise[0])),
+              "the same table of thresholds at every noise: a larger innovation picks a shorter window"),
     ]
+
+
+def _window_by_noise(options, seed):
+    """The LS-fed filter's mean window at three speed-log noises (r following the noise)."""
+    from dataclasses import replace
+
+    from kfpga.model import lsfront as ls
+
+    base = _scenario(options)
+    out = []
+    for sigma in (base.sigma_v / 2.0, base.sigma_v, base.sigma_v * 2.0):
+        s = replace(base, sigma_v=sigma)
+        _, _, v, _ = deceleration_log(s, seed)
+        params = replace(_params(options, base), r=sigma ** 2)
+        out.append((sigma, float(np.mean(ls.lsfront(v, params)["Ns"]))))
+    return out
 
 
 def ls_frontend_plot(result, path):
@@ -203,7 +266,7 @@ def ls_frontend_plot(result, path):
 
     s = result["series"]
     t = s["t"]
-    names = [r["filter"] for r in result["rows"][1:]]
+    names = [r["filter"] for r in result["rows"][1:] if r["filter"] != VONLY_EQUAL]
     fig, (a, b) = plt.subplots(2, 1, figsize=(13, 8), sharex=True)
     a.plot(t, s["raw"], ".", ms=1.5, color="0.7", label="speed log")
     a.plot(t, s["truth"], "k--", lw=0.8, label="true speed")
@@ -218,6 +281,50 @@ def ls_frontend_plot(result, path):
     save_figure(fig, path, dpi=110)
 
 
+def _add_arguments(parser):
+    parser.add_argument("--q", type=float, metavar="Q", help="the filter's process noise on the acceleration per step "
+                                                            "(default: 1e-5)")
+    parser.add_argument("--noise", type=float, metavar="M_S", help="the speed log's noise, m/s (default: 0.1); the "
+                                                                 "filter's r follows it (noise^2)")
+    parser.add_argument("--table", metavar="T:NS,...", help="the window table: |innovation| below each threshold "
+                                                            "(m/s) picks Ns, the last threshold inf (default: "
+                                                            "0.1:30,0.3:12,inf:5)")
+
+
+def _scenario(options):
+    from kfpga.core.errors import UsageError
+
+    if options.noise is not None and not 0.0 < options.noise <= 10.0:
+        raise UsageError(f"--noise must be in (0, 10] m/s, not {options.noise:g}")
+    return DecelerationScenario() if options.noise is None else DecelerationScenario(sigma_v=options.noise)
+
+
+def _params(options, scenario):
+    from kfpga.core.errors import UsageError
+    from kfpga.model import lsfront as ls
+
+    kwargs = {"T": scenario.T, "r": scenario.sigma_v ** 2}
+    if options.q is not None:
+        kwargs["q"] = options.q
+    if options.table is not None:
+        try:
+            kwargs["table"] = tuple((float(t), int(n)) for t, n in (row.split(":") for row in options.table.split(",")))
+        except ValueError:
+            raise UsageError(f"--table must be threshold:Ns pairs separated by commas (0.1:30,0.3:12,inf:5), not "
+                             f"{options.table!r}") from None
+    try:
+        return ls.LSFrontParams(**kwargs)
+    except (TypeError, ValueError) as exc:
+        raise UsageError(f"--{'table' if 'table' in str(exc) or 'Ns' in str(exc) or 'threshold' in str(exc) else 'q'}: "
+                         f"{exc}") from None
+
+
+def _run(options, seed):
+    scenario = _scenario(options)
+    return ls_frontend(scenario, seed=seed, params=_params(options, scenario)) | {
+        "window_by_noise": _window_by_noise(options, seed)}
+
+
 EVALUATION = Evaluation(
     summary="seeds/003: the least-squares pseudo-acceleration front end of a Kalman filter, on a ship decelerating "
             "to a stop",
@@ -227,10 +334,12 @@ EVALUATION = Evaluation(
                 "measured acceleration, the velocity-only Kalman filter and the moving average. Prints noise "
                 "suppression (RMSE at constant speed and stopped) and responsiveness (onset delay, lag in the ramp, "
                 "undershoot after the stop), and how they compare with the patent.",
-    add_arguments=lambda parser: None,
-    run=lambda options, seed: ls_frontend(seed=seed),
+    add_arguments=_add_arguments,
+    check=lambda options: _params(options, _scenario(options)),
+    run=_run,
     table=ls_frontend_table,
-    summary_json=lambda r: ({k: r[k] for k in ("seed", "scenario", "params", "rows", "windows", "fixed")}
-                            | {"findings": ls_frontend_findings(r)}),
+    summary_json=lambda r: {k: r[k] for k in ("seed", "scenario", "params", "rows", "windows", "mean_window", "fixed",
+                                              "window_by_noise")},
+    claims=ls_frontend_claims,
     plot=ls_frontend_plot,
 )
