@@ -154,3 +154,28 @@ def test_alpha_beta_tracks_start_from_their_first_two_plots():
     assert np.array_equal(x[:, 1], z[:, 1]) and np.array_equal(v[:, 1], z[:, 1] - z[:, 0])
     assert np.allclose(fx[:, 1], z[:, 1]) and np.allclose(fv[:, 1], z[:, 1] - z[:, 0], atol=0.01)
     assert np.max(np.abs(v[:, 1])) < 10  # a plot's noise, never the position itself
+
+
+def _readme_claims():
+    """``{name: [(claim, verdict with its count), ...]}`` of the README's claims blocks."""
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).parents[1] / "README.md").read_text()
+    out = {}
+    for name, body in re.findall(r"<!-- claims (\w+):.*?-->\n(.*?)<!-- /claims -->", text, flags=re.S):
+        rows = [line.split(" | ") for line in body.splitlines() if re.match(r"\| \d+ \| ", line)]
+        out[name] = [(row[1], row[4].split(":")[0].rstrip(" |")) for row in rows]
+    return out
+
+
+@pytest.mark.parametrize("name", EVALUATED)
+def test_readme_quotes_the_default_runs_verdicts(name, capsys):
+    """The README's verdicts are the default run's (20 seeds), claim by claim, count by count."""
+    quoted = _readme_claims()
+    assert name in quoted, f"README has no claims block for {name}: kfpga evaluate {name} --markdown"
+    assert main(["evaluate", name, "--markdown", "--quiet"]) == 0
+    ours = [(row[1], row[4].split(":")[0].rstrip(" |")) for row in
+            (line.split(" | ") for line in capsys.readouterr().out.splitlines() if line.startswith("| ") and
+             line.split(" | ")[0][2:].isdigit())]
+    assert len(ours) >= 3 and quoted[name] == ours, f"README's claims of {name} are stale: kfpga evaluate {name} --markdown"

@@ -9,7 +9,7 @@ import sys
 
 from kfpga.cli import common
 from kfpga.core import registry
-from kfpga.core.claims import claims_table
+from kfpga.core.claims import claims_markdown, claims_table
 from kfpga.core.errors import UsageError
 
 #: Seeds of a run when neither ``--seed`` nor ``--seeds`` is given: 1 .. 20, the same on every
@@ -44,6 +44,7 @@ def add_parser(sub):
         q.add_argument("--seed", type=common.seed_type, metavar="S",
                        help="the first seed (alone: replay that one seed)")
         common.add_json(q, "print the tables and the claims as JSON")
+        q.add_argument("--markdown", action="store_true", help="print the claims alone, as a Markdown table")
         q.add_argument("--plot", metavar="PNG", help="draw the evaluation's figures (of the first seed)")
         common.add_quiet(q)
         q.set_defaults(func=run, spec_name=spec.name)
@@ -86,6 +87,8 @@ def run(args):
     plot = common.check_plot(args.plot)
     if plot and evaluation.plot is None:
         common.not_with("--plot", f"evaluate {args.spec_name}", "this evaluation has no figures")
+    if args.markdown and args.json:
+        common.not_with("--markdown", "--json", "each prints the claims its own way")
     evaluation.check(args)
     if evaluation.seeded(args):
         seeds = seeds_of(args)
@@ -103,7 +106,9 @@ def run(args):
     if plot:
         evaluation.plot(result, plot)
         common.info(f"plot: {plot}")
-    if args.json:
+    if args.markdown:
+        print(claims_markdown(claims, _runs_label(seeds)))
+    elif args.json:
         common.emit_json(evaluation.summary_json(result) | {"seeds": seeds, "claims": [c.to_json() for c in claims]})
     else:
         print(evaluation.table(result))

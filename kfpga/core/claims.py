@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Claim", "spread", "claims_table", "REPRODUCED", "NOT_REPRODUCED", "NOT_TESTABLE"]
+__all__ = ["Claim", "spread", "claims_table", "claims_markdown", "REPRODUCED", "NOT_REPRODUCED", "NOT_TESTABLE"]
 
 REPRODUCED, NOT_REPRODUCED, NOT_TESTABLE = "reproduced", "not reproduced", "not testable"
 
@@ -91,4 +91,19 @@ def claims_table(claims, runs_label):
                   f"    verdict:  {c.verdict.upper()}{count}" + (f"; {c.reason}" if c.reason else "")]
     counts = {v: sum(c.verdict == v for c in claims) for v in (REPRODUCED, NOT_REPRODUCED, NOT_TESTABLE)}
     lines.append("    " + ", ".join(f"{n} {v}" for v, n in counts.items()))
+    return "\n".join(lines)
+
+
+def claims_markdown(claims, runs_label):
+    """The claims as a Markdown table (the manual quotes the default run's, checked by the tests)."""
+
+    def cell(text):
+        return str(text).replace("|", "\\|")
+
+    lines = [f"Over {runs_label}:", "", "| # | claim | document | ours | verdict |", "| --- | --- | --- | --- | --- |"]
+    for i, c in enumerate(claims, 1):
+        count = "" if c.holds is None else f" ({c.held} of {c.seeds})"
+        reason = f": {c.reason}" if c.reason and c.holds is None else ""
+        lines.append(f"| {i} | {cell(c.claim)} | {cell(c.document)} | {cell(c.ours)} | "
+                     f"**{c.verdict}**{count}{cell(reason)} |")
     return "\n".join(lines)
