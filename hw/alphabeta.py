@@ -22,7 +22,9 @@ from kfpga.core.ads8364 import CODE_FORMAT
 from kfpga.hw.cvloop import CUTS, ConstantGainLoop, steady_correct, steady_predict, steady_products
 from kfpga.hw.storage import check_channels, m4k_blocks
 from kfpga.model import cvloop as eq
+from kfpga.model import start
 from kfpga.model.alphabeta import MAX_TRACKS
+from kfpga.model.start import START
 
 __all__ = ["SteadyCore", "TrackerCore", "make_core", "tracker_m4k_blocks"]
 
@@ -54,11 +56,12 @@ class SteadyCore(ConstantGainLoop):
 
 
 def tracker_m4k_blocks(config, states):
-    """M4K blocks holding ``states`` words of x1 and v (0 for 8 states or fewer: registers)."""
+    """M4K blocks holding ``states`` words of x1, v and the start's count (0 for 8 states or
+    fewer: registers)."""
     if states <= 8:
         return 0
     f = config.formats
-    return m4k_blocks(states, f["x1"].width + f["v"].width)
+    return m4k_blocks(states, f["x1"].width + f["v"].width + (START.width if start.measured(config.params) else 0))
 
 
 def _track_bits(tracks):

@@ -206,7 +206,6 @@ class LoopPipeline(Core):
 
     def elaborate(self, platform):
         m = Module()
-        f = self.config.formats
         in_memory = self.channels > MAX_REGISTER_CHANNELS
         regs = {} if in_memory else self._states()
         advance = Signal()
@@ -223,7 +222,8 @@ class LoopPipeline(Core):
 
         live = {name: Fx(getattr(s0, name).as_signed(), 0, None, CODE_FORMAT, name) for name in self.config.inputs}
         if in_memory:
-            memory = StateMemory(self.channels, {n: f[p] for n, p in self.state_points.items()}, self.reset_state)
+            memory = StateMemory(self.channels, {n: self.config.point_format(p) for n, p in self.state_points.items()},
+                                 self.reset_state)
             m.submodules.state = memory
             m.d.comb += memory.read_addr.eq(Mux(take, self.i.payload.channel, s0.channel))
             live.update(memory.values(m, s0.channel))

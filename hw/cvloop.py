@@ -13,8 +13,9 @@ from typing import ClassVar
 
 from kfpga.hw.core import LoopPipeline
 from kfpga.model import cvloop as eq
+from kfpga.model import start
 
-__all__ = ["ConstantGainLoop", "STEADY_STEPS", "STEADY_READS", "CUTS", "steady_predict", "steady_innovation",
+__all__ = ["ConstantGainLoop", "with_start", "STEADY_STEPS", "STEADY_READS", "CUTS", "steady_predict", "steady_innovation",
            "steady_products", "steady_correct"]
 
 
@@ -37,6 +38,24 @@ def steady_correct(ops, k, v):
     v["x1_next"] = eq.correct(ops, v["xl1"], v["k1e"], "x1")             # x1 = xl1 + K1 e
     v["v_next"] = eq.correct(ops, v["v"], v["k2e"], "v")                 # v = v + T K2 e
     return v
+
+
+def with_start(correct, observation):
+    """The last step ``correct`` followed by the start from the first measurements (``[model]
+    init = "measurement"``, ``model/start.py``): x1 = y on a channel's samples 0 and 1, v = y1 - y0
+    on sample 1, the channel's 2-bit count written back with its state. The model's own
+    :func:`~kfpga.model.cvloop.measured_start`: two comparisons and three multiplexers, no
+    arithmetic beyond one subtraction, in the loop's last stage."""
+
+    def step(ops, k, v):
+        v = correct(ops, k, v)
+        state = {"x1": v["x1"], "v": v["v"], "start": v["start"]}
+        x1, rate, count = eq.measured_start(ops, k, state, v[observation], v["x1_next"], v["v_next"])
+        v.update(x1_next=x1, v_next=rate, start_next=count["start"])
+        return v
+
+    step.__name__ = f"{correct.__name__}_with_start"
+    return step
 
 
 #: The steady-state update as four steps of about one carry chain (or one multiplier) each;
@@ -92,6 +111,12 @@ class ConstantGainLoop(LoopPipeline):
 
     def __init__(self, config, *, channels=1, stages=4, index_bits=None):
         super().__init__(config, "steady", channels=channels, stages=stages, index_bits=index_bits)
+        if start.measured(config.params):
+            # each channel its own count: every channel (a track's axis, a sensor) starts on its own
+            observation = config.inputs[0]
+            self.steps = (*self.steps[:-1], with_start(self.steps[-1], observation))
+            self.reads = (*self.reads[:-1], self.reads[-1] | {"x1", "start", observation})
+            self.writes = {**self.writes, "start": "start_next"}
 
     def outputs(self, live):
         return {"x1": live["x1_next"], "yhat": live["xl1"], "x2": live["v_next"]}

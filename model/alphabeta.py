@@ -97,10 +97,12 @@ class AlphaBetaParams:
         update: it sizes the word lengths (the innovation's and the registers' steps small
         against the error that noise leaves) and the ranges.
     x0:
-        State after reset ``(x, v)``.
+        State after reset ``(x, v)`` (used with ``init = "state"``).
     init:
-        ``"state"``: start from ``x0``; ``"measurement"``: each track from its first two plots
-        (``model/start.py``).
+        ``"measurement"`` (the default): each track from its first two plots, position the
+        second and velocity their difference (``model/start.py``), in the model, ``kfpga filter
+        --tracks`` and every core; ``"state"``: from ``x0`` (a track then takes tens of scans
+        to forget a guess far from the target).
 
     Raises ``TypeError`` for a value of the wrong type and ``ValueError`` for a wrong value,
     the message starting with the field's name.
@@ -111,7 +113,7 @@ class AlphaBetaParams:
     T: float = 1.0
     R: float = 4.0
     x0: tuple = (0.0, 0.0)
-    init: str = "state"
+    init: str = "measurement"
 
     def __post_init__(self):
         s = object.__setattr__
@@ -166,7 +168,7 @@ def _initial(params):
 VARIANTS = {
     "steady": Variant("steady", "constant gains alpha, beta: one update per sample, no multiplier for a power-of-two gain",
                       lambda params: (("x1", "x1"), ("v", "v"), *start.start_state(params)), _constants, _initial,
-                      update, hardware=start.hardware),
+                      update),  # every core runs the start: the loop's (hw/cvloop.py) and the sequential one
 }
 
 

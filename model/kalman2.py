@@ -177,7 +177,7 @@ def _steady_applies(params):
 VARIANTS = {
     "steady": Variant("steady", "constant gain K_inf (an alpha-beta filter): one update per sample, no divider",
                       lambda params: (("x1", "x1"), ("v", "v"), *start.start_state(params)), _steady_constants,
-                      _initial, steady_update, _steady_applies, start.hardware),
+                      _initial, steady_update, _steady_applies),  # the loop runs the start (hw/cvloop.py)
     "full": Variant("full", "time-varying gain: covariance and two restoring dividers per update",
                     lambda params: (("x1", "x1"), ("v", "v"), ("p11", "p"), ("p12", "p"), ("p21", "p"), ("p22", "p"),
                                     *start.start_state(params)),

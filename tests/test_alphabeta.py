@@ -27,7 +27,8 @@ from kfpga.sim.runner import SIMULATORS, build, run
 from kfpga.sim.scoreboard import Scoreboard
 from kfpga.sim.sources import stress_codes
 
-CONFIG = FilterConfig(filter="alphabeta")
+CONFIG = FilterConfig(filter="alphabeta")  # each track from its first two plots (the default)
+FROM_STATE = FilterConfig(filter="alphabeta", params=ab.AlphaBetaParams(init="state"))
 
 
 # -- parameters -------------------------------------------------------------------------------
@@ -108,7 +109,7 @@ def test_alpha_beta_with_the_kalman_gain_is_the_steady_state_kalman_filter(param
 
 def test_reference_follows_its_equations():
     """Two steps by hand: x0 = (10, 1), T = 2, alpha = 0.5, beta = 0.4; z = 14, 15."""
-    p = ab.AlphaBetaParams(alpha=0.5, beta=0.4, T=2.0, x0=(10.0, 1.0))
+    p = ab.AlphaBetaParams(alpha=0.5, beta=0.4, T=2.0, x0=(10.0, 1.0), init="state")
     out = ab.reference(p, "steady", np.array([14.0, 15.0]))
     # xp = 12, e = 2: x = 13, v = 1 + 0.2 * 2 = 1.4; xp = 15.8, e = -0.8: x = 15.4, v = 1.4 - 0.16
     np.testing.assert_allclose(out["x"], [13.0, 15.4])
@@ -228,14 +229,19 @@ def test_the_same_track_back_to_back_stalls(tracks, gap):
 
 
 def test_state_memory_m4k_blocks():
-    """x1 (26 bits) and v (25 bits): 51-bit words. 512 words deep an M4K block is 9 bits wide."""
-    width = CONFIG.formats["x1"].width + CONFIG.formats["v"].width
-    assert width == 51
-    assert tracker_m4k_blocks(CONFIG, 2 * MAX_TRACKS) == math.ceil(51 / 9) == 6
-    assert tracker_m4k_blocks(CONFIG, 2 * 64) == math.ceil(51 / 36) == 2
+    """x1 (26 bits), v (26 bits: it holds the first two plots' difference) and the start's 2-bit
+    count: 54-bit words. 512 words deep an M4K block is 9 bits wide."""
+    width = CONFIG.formats["x1"].width + CONFIG.formats["v"].width + 2
+    assert width == 54
+    assert tracker_m4k_blocks(CONFIG, 2 * MAX_TRACKS) == math.ceil(54 / 9) == 6
+    assert tracker_m4k_blocks(CONFIG, 2 * 64) == math.ceil(54 / 36) == 2
     assert tracker_m4k_blocks(CONFIG, 8) == 0  # registers
     assert m4k_blocks(4096, 1) == 1 and m4k_blocks(257, 18) == 2 and m4k_blocks(8192, 2) == 4
-    assert tracker_m4k_blocks(CONFIG, 200) == math.ceil(51 / 18) == 3  # 256 deep: 18 bits per block
+    assert tracker_m4k_blocks(CONFIG, 200) == math.ceil(54 / 18) == 3  # 256 deep: 18 bits per block
+    # from x0, no count: x1 and v (25 bits), 51
+    from_state = FilterConfig(filter="alphabeta", params=ab.AlphaBetaParams(init="state"))
+    assert from_state.formats["x1"].width + from_state.formats["v"].width == 51
+    assert tracker_m4k_blocks(from_state, 2 * MAX_TRACKS) == math.ceil(51 / 9) == 6
 
 
 @pytest.mark.parametrize(("tracks", "error", "message"), [
@@ -291,9 +297,14 @@ def test_operation_counts_are_the_equations():
     from kfpga.core.ops import update_cost
 
     none = {"square roots": 0, "comparisons": 0, "selections": 0}
-    assert update_cost(FilterConfig(filter="alphabeta", params=ab.AlphaBetaParams(alpha=0.4, beta=0.1)), "steady") == \
+    assert update_cost(FilterConfig(filter="alphabeta", params=ab.AlphaBetaParams(alpha=0.4, beta=0.1, init="state")),
+                       "steady") == \
         {"additions": 4, "multiplications": 2, "shifts": 0, "divisions": 0, **none}
-    assert update_cost(CONFIG, "steady") == {"additions": 4, "multiplications": 0, "shifts": 2, "divisions": 0, **none}
+    assert update_cost(FROM_STATE, "steady") == {"additions": 4, "multiplications": 0, "shifts": 2, "divisions": 0, **none}
+    # the start from the first two plots: one subtraction, two comparisons of the count and five selections
+    # (two of the next count, one of x, two of v)
+    assert update_cost(CONFIG, "steady") == {"additions": 5, "multiplications": 0, "shifts": 2, "divisions": 0,
+                                             "square roots": 0, "comparisons": 2, "selections": 5}
     assert update_cost(FilterConfig(), "full") == {"additions": 15, "multiplications": 6, "shifts": 0, "divisions": 2, **none}
 
 

@@ -179,3 +179,24 @@ def test_readme_quotes_the_default_runs_verdicts(name, capsys):
             (line.split(" | ") for line in capsys.readouterr().out.splitlines() if line.startswith("| ") and
              line.split(" | ")[0][2:].isdigit())]
     assert len(ours) >= 3 and quoted[name] == ours, f"README's claims of {name} are stale: kfpga evaluate {name} --markdown"
+
+
+def test_filter_tracks_start_each_track_from_its_first_two_plots(tmp_path, capsys):
+    """``kfpga filter --tracks``: each (track, axis) starts from its own first two plots, in float
+    and bit-accurate, whatever the order the plots come in."""
+    import csv
+
+    plots = [(0, 0, 100), (1, 0, -40), (0, 1, 500), (0, 0, 103), (1, 0, -37), (0, 1, 498), (0, 0, 106)]
+    src = tmp_path / "tracks.csv"
+    src.write_text("track,axis,z\n" + "\n".join(f"{t},{a},{z}" for t, a, z in plots) + "\n")
+    for exact in ([], ["--float"]):
+        out = tmp_path / "out.csv"
+        assert main(["filter", "--filter", "alpha-beta", "--tracks", "2", "--input", str(src), "--output", str(out),
+                     *exact]) == 0
+        rows = list(csv.DictReader(out.open()))
+        v = [float(r["v"]) for r in rows]
+        x = [float(r["x"]) for r in rows]
+        assert x[:6] == [100, -40, 500, 103, -37, 498]  # each track's first two plots taken as they are
+        assert v[3] == 3 and v[4] == 3 and v[5] == -2  # the rate: the two plots' difference
+        assert abs(x[6] - 106) < 1e-6  # then the loop: the prediction 106 meets the plot 106
+    capsys.readouterr()

@@ -114,11 +114,20 @@ def test_the_roll_predictor_starts_from_three_samples_as_its_paper_does(variant)
         assert (out["pred"][5], out["rate"][5], out["accel"][5]) == (62.0, 16.0, 0.0)
 
 
+#: The parallel cores that run the start: the constant-gain loop's (hw/cvloop.py)
+PARALLEL_STARTS = {("kalman2", "steady"), ("alphabeta", "steady")}
+
+
 @pytest.mark.parametrize("key", STARTS)
-def test_the_parallel_cores_refuse_it_and_the_sequential_core_runs_it(key):
+def test_which_cores_run_it(key):
+    """The constant-gain loop runs the start; the other parallel cores (hand-pipelined for one
+    update form) refuse it, and the sequential core runs every one."""
     name, params, _, _ = STARTS[key]
     config = FilterConfig(filter=name, params=params)
     for variant in config.spec.variants:
+        if (key, variant) in PARALLEL_STARTS:
+            assert config.spec.architectures(variant, params) == ("parallel", "sequential")
+            continue
         assert config.spec.architectures(variant, params) == ("sequential",)
         why = config.spec.why_not(variant, params, "parallel")
         assert why.startswith('model.init = "measurement": the start from the first samples runs on the sequential')
@@ -126,10 +135,13 @@ def test_the_parallel_cores_refuse_it_and_the_sequential_core_runs_it(key):
 
 @pytest.mark.cosim
 @pytest.mark.parametrize("simulator", SIMULATORS)
-@pytest.mark.parametrize(("key", "variant"), [("kalman", "full"), ("kalman2", "steady"), ("roll", "sqrt")])
-def test_the_start_is_bit_exact_on_the_core(key, variant, simulator, seed):
-    """The sequential core's generated Verilog against the model, two channels (each starts by
-    itself), from a signal far from x0."""
+@pytest.mark.parametrize(("key", "variant", "architecture", "channels"),
+                         [("kalman", "full", "sequential", 2), ("kalman2", "steady", "sequential", 2),
+                          ("roll", "sqrt", "sequential", 2), ("kalman2", "steady", "parallel", 2),
+                          ("alphabeta", "steady", "parallel", 3), ("alphabeta", "steady", "parallel", 10)])
+def test_the_start_is_bit_exact_on_the_core(key, variant, architecture, channels, simulator, seed):
+    """The core's generated Verilog against the model, several channels (each starts by itself;
+    10: the states and counts in block memory), from a signal far from x0."""
     need(simulator)
     if key == "roll":
         name, params = "roll", RollParams(init="measurement")
@@ -138,11 +150,11 @@ def test_the_start_is_bit_exact_on_the_core(key, variant, simulator, seed):
     config = FilterConfig(filter=name, params=params)
     _, y = scenarios.for_config(config.spec.scenarios[0], 50, seed, config)
     y = np.clip(y + 9000, -32768, 32767)
-    result = run(build(simulator, "core", config=config, variant=variant, channels=2, architecture="sequential"),
+    result = run(build(simulator, "core", config=config, variant=variant, channels=channels, architecture=architecture),
                  "test_core", testcase="core_bit_exact",
-                 params={"variant": variant, "seed": seed, "codes": [int(c) for c in y], "channels": 2, "p_idle": 0.2,
-                         "p_ready": 0.7, "config_toml": config.to_toml(), "architecture": "sequential"},
-                 tag=f"start-{key}")
+                 params={"variant": variant, "seed": seed, "codes": [int(c) for c in y], "channels": channels,
+                         "p_idle": 0.2, "p_ready": 0.7, "config_toml": config.to_toml(), "architecture": architecture},
+                 tag=f"start-{key}-{architecture}-{channels}")
     assert result["ok"] and result["mismatches"] == 0 and result["samples"] == 50, result.get("first_mismatches")
 
 
