@@ -88,26 +88,29 @@ class OnlineCore(Core):
             def step(ops, k, v, s):
                 values = eq.network_layer(ops, [v.get(p) for p in range(max(reads[0]) + 1)], layers[n])
                 out = {p: values[p] for p in reads[n + 1]}
-                out.update({key: v[key] for key in ("first", "centre") if key in v})
+                out.update({key: v[key] for key in ("first", "centre", "shift") if key in v})
                 return out
             return step
 
         return [(f"{tag}-{n + 1}", (), layer_step(n)) for n in range(len(layers))]
 
     def _window(self, ops, k, v, state):
-        first, window = eq.window_step(ops, state, v["y"])
+        first, window, shift = eq.window_step(ops, k, state, v["y"])
         writes = {"w1": window[0], "w2": window[1], "w3": window[2], "w4": window[3],
                   "primed": ops.const(1, eq.FLAG, "1")}
-        return {**dict(enumerate(window)), "first": first, "centre": window[4]}, writes
+        # an angle's frame shift travels with the sample to the lines of medians it moves
+        return {**dict(enumerate(window)), "first": first, "centre": window[4],
+                **({} if shift is None else {"shift": shift})}, writes
 
     def _a_line(self, ops, k, v, state):
         m5 = v[2]
-        a1, a2 = eq.primed_line(ops, v["first"], m5, [state["a1"], state["a2"]])
-        return {0: m5, 1: a1, 2: a2, "first": v["first"], "centre": v["centre"]}, {"a1": m5, "a2": a1}
+        a1, a2 = eq.primed_line(ops, v["first"], m5, [state["a1"], state["a2"]], v.get("shift"))
+        return ({0: m5, 1: a1, 2: a2, "first": v["first"], "centre": v["centre"],
+                 **({"shift": v["shift"]} if "shift" in v else {})}, {"a1": m5, "a2": a1})
 
     def _b_line(self, ops, k, v, state):
         m3 = v[1]
-        b1, b2 = eq.primed_line(ops, v["first"], m3, [state["b1"], state["b2"]])
+        b1, b2 = eq.primed_line(ops, v["first"], m3, [state["b1"], state["b2"]], v.get("shift"))
         return ({"partial": eq.hanning_partial(ops, b2, b1), "m3": m3, "centre": v["centre"]},
                 {"b1": m3, "b2": b1})
 

@@ -30,6 +30,15 @@ rounding rule; by default ``x3`` is a 16-bit code rounded to the nearest, ties u
 cannot overflow. The test ``|x - x3| > threshold`` is exact (the threshold is a constant of
 point ``threshold``), and the output ``y`` (point ``y``) is either the sample or ``x3``.
 
+**Angles** (``period``, the codes of a full turn: 36000 for a heading in 0.01 deg codes): the
+window and the medians are kept in the frame of the channel's newest sample. When a sample is
+more than half a turn from the one before (a heading crossing +-180 deg), every stored value of
+the channel moves by a full turn with it (:func:`frame_shift`), so the medians, the Hanning value
+and the threshold test see a continuous angle; the output is brought back into
+``[-period/2, period/2)``. A heading crossing +-180 deg passes unchanged (a code of exactly
+``+period/2``, +180.00 deg, comes out as ``-period/2``, the same angle), and an outlier next to
+the crossing is found as anywhere else. The stored values then need 18 bits (point ``x``).
+
 **Thresholds from physical limits** (the paper, §3): a velocity cannot change by more than
 ``a_max * T`` in one sample, an attitude angle by more than ``omega_max * T``
 (:func:`velocity_threshold`, :func:`attitude_threshold`, in codes of a given LSB).
@@ -61,6 +70,10 @@ MIN_OFFLINE = 16
 MAX_THRESHOLD = float(2 * CODE_MAX + 1)
 #: The format of the "primed" flag of a channel's state (0 after reset, 1 once a sample came).
 FLAG = QFormat(2, 0)
+#: The format of a full turn of an angle (``period``) and the shifts by it: up to 65536 codes.
+TURN = QFormat(18, 0)
+#: The largest period: the 16-bit codes' own turn.
+MAX_PERIOD = 65536
 
 
 def velocity_threshold(a_max, T, lsb):
@@ -88,11 +101,17 @@ class Tukey53HParams:
     threshold:
         A sample further than this from its smoothed value (in input units: codes) is an
         outlier and is replaced; > 0 and at most 65535 (two codes differ by no more).
+    period:
+        For an angle, the codes of a full turn (36000 for 0.01 deg codes, 65536 for a binary
+        angle): an even integer 4..65536, the threshold below a quarter of it; a heading that
+        crosses half a turn then passes unchanged (module docstring). ``None`` (the default):
+        not an angle.
 
     Raises ``TypeError`` for a value of the wrong type and ``ValueError`` for a wrong value.
     """
 
     threshold: float = 500.0
+    period: float | None = None
 
     def __post_init__(self):
         value = number("threshold", self.threshold)
@@ -100,6 +119,15 @@ class Tukey53HParams:
             raise ValueError(f"threshold must be > 0 (in codes) and at most {MAX_THRESHOLD:g}, the largest difference "
                              f"of two 16-bit codes, not {self.threshold!r}")
         object.__setattr__(self, "threshold", value)
+        if self.period is not None:
+            turn = number("period", self.period)
+            if turn != int(turn) or int(turn) % 2 or not 4 <= turn <= MAX_PERIOD:
+                raise ValueError(f"period must be an even integer 4..{MAX_PERIOD} (the codes of a full turn), not "
+                                 f"{self.period!r}")
+            if value >= turn / 4:
+                raise ValueError(f"threshold must be below a quarter of the period ({turn / 4:g} codes), not "
+                                 f"{value:g}: an angle's outlier test needs the window within half a turn")
+            object.__setattr__(self, "period", float(turn))
 
 
 POINTS = {
@@ -190,31 +218,59 @@ def residual(ops, sample, x3):
 
 
 def decide(ops, k, sample, x3, distance):
-    """``y = x3`` where ``distance = |sample - x3| > threshold``, else the sample."""
-    return ops.rq(ops.select(ops.gt(distance, k["threshold"]), x3, sample), "y")
+    """``y = x3`` where ``distance = |sample - x3| > threshold``, else the sample (for an angle,
+    brought back into the codes' half turns)."""
+    return ops.rq(wrapped(ops, k, ops.select(ops.gt(distance, k["threshold"]), x3, sample)), "y")
 
 
-def window_step(ops, x, sample):
-    """``(first, window)``: whether this is the channel's first sample (its state then fills
-    with it), and the window ``[sample, w1, w2, w3, w4]``, newest first."""
+def frame_shift(ops, k, sample, previous):
+    """For an angle (``period``): the full turn by which the channel's stored values move to the
+    frame of ``sample``, +period when it is more than half a turn above ``previous`` (the stored
+    newest sample), -period when more than half a turn below, else 0; ``None`` without a period."""
+    if "turn" not in k:
+        return None
+    d = ops.sub(sample, previous)
+    return ops.select(ops.gt(d, k["half_turn"]), k["turn"],
+                      ops.select(ops.gt(k["minus_half_turn"], d), k["minus_turn"], k["no_turn"]))
+
+
+def shifted(ops, value, shift):
+    """A stored value moved by the frame shift (unchanged without a period)."""
+    return value if shift is None else ops.rq(ops.add(value, shift), "x", "turned")
+
+
+def wrapped(ops, k, value):
+    """For an angle: ``value`` brought into ``[-period/2, period/2)`` (unchanged without one)."""
+    if "turn" not in k:
+        return value
+    return ops.select(ops.gt(value, k["half_turn_less"]), ops.sub(value, k["turn"]),
+                      ops.select(ops.gt(k["minus_half_turn"], value), ops.add(value, k["turn"]), value))
+
+
+def window_step(ops, k, x, sample):
+    """``(first, window, shift)``: whether this is the channel's first sample (its state then
+    fills with it), the window ``[sample, w1, w2, w3, w4]``, newest first (for an angle, in the
+    sample's frame), and the frame shift the channel's other stored values take (``None``
+    without a period)."""
     first = ops.gt(ops.const(1, FLAG, "1"), x["primed"])
     s = ops.rq(sample, "x", "sample")
-    return first, [s] + [ops.select(first, s, x[f"w{i}"]) for i in range(1, 5)]
+    shift = frame_shift(ops, k, s, x["w1"])
+    return first, [s] + [ops.select(first, s, shifted(ops, x[f"w{i}"], shift)) for i in range(1, 5)], shift
 
 
-def primed_line(ops, first, value, line):
+def primed_line(ops, first, value, line, shift=None):
     """The delay line ``line`` (the previous values, newest first), filled with ``value`` on a
-    channel's first sample."""
-    return [ops.select(first, value, held) for held in line]
+    channel's first sample; moved by the frame shift of an angle."""
+    return [ops.select(first, value, shifted(ops, held, shift)) for held in line]
 
 
 def update(ops, k, x, u):
     """One sample in, the decision on the sample 4 before out: ``(next state, outputs)``."""
-    first, window = window_step(ops, x, u["y"])
+    first, window, shift = window_step(ops, k, x, u["y"])
     m5 = median5(ops, *window)
-    a1, a2 = primed_line(ops, first, m5, [x["a1"], x["a2"]])
+    a1, a2 = primed_line(ops, first, m5, [x["a1"], x["a2"]], shift)
     m3 = median3(ops, m5, a1, a2)
-    b1, b2 = primed_line(ops, first, m3, [x["b1"], x["b2"]])
+    b1, b2 = primed_line(ops, first, m3, [x["b1"], x["b2"]], shift)
     x3 = hanning(ops, hanning_partial(ops, b2, b1), m3)
     y = decide(ops, k, window[4], x3, residual(ops, window[4], x3))
     nxt = {"w1": window[0], "w2": window[1], "w3": window[2], "w4": window[3], "a1": m5, "a2": a1, "b1": m3, "b2": b1,
@@ -223,7 +279,13 @@ def update(ops, k, x, u):
 
 
 def _constants(params):
-    return {"threshold": Constant(params.threshold, "threshold", "threshold")}
+    k = {"threshold": Constant(params.threshold, "threshold", "threshold")}
+    if params.period is not None:
+        p = params.period
+        k.update(turn=Constant(p, TURN, "period"), minus_turn=Constant(-p, TURN, "-period"),
+                 half_turn=Constant(p / 2, TURN, "period/2"), minus_half_turn=Constant(-p / 2, TURN, "-period/2"),
+                 half_turn_less=Constant(p / 2 - 1, TURN, "period/2 - 1"), no_turn=Constant(0.0, TURN, "0"))
+    return k
 
 
 def _initial(params):
@@ -259,8 +321,14 @@ def _online_float(x, threshold, x3_round=None):
 
 
 def reference(params, variant, y):
-    """The float online smoother along the last axis of ``y``: ``{"y"}`` (exact Hanning values)."""
-    return {"y": _online_float(y, params.threshold)[0]}
+    """The float online smoother along the last axis of ``y``: ``{"y"}`` (exact Hanning values).
+    For an angle the series is unwrapped first (numpy's ``unwrap`` over the period) and the
+    output wrapped back into ``[-period/2, period/2)``."""
+    if params.period is None:
+        return {"y": _online_float(y, params.threshold)[0]}
+    p = params.period
+    out = _online_float(np.unwrap(np.asarray(y, dtype=np.float64), period=p, axis=-1), params.threshold)[0]
+    return {"y": (out + p / 2) % p - p / 2}
 
 
 def offline(x, params=None, *, run=None):
@@ -302,8 +370,10 @@ def _points_for(params):
 
 
 def _ranges(params, stimulus=None):
-    # a median selects a sample, a Hanning value lies between samples: nothing leaves the codes
-    return {"x": float(CODE_MAX), "x3": float(CODE_MAX), "y": float(CODE_MAX), "threshold": params.threshold}
+    # a median selects a sample, a Hanning value lies between samples: nothing leaves the codes;
+    # an angle's frame moves its stored values by up to a turn
+    stored = float(CODE_MAX) if params.period is None else float(CODE_MAX + params.period)
+    return {"x": stored, "x3": stored, "y": float(CODE_MAX), "threshold": params.threshold}
 
 
 def _default_formats(params, ranges, *, operand_bits, state_frac):
@@ -311,7 +381,8 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
     many bits as it needs, and the fraction bits that hold it within 1 %."""
     frac = precision_frac_bits(params.threshold)
     int_bits = next(i for i in range(2, 20) if QFormat(i, frac).covers(params.threshold))
-    return {"x": CODE_FORMAT, "x3": QFormat(16, 0, Rounding.NEAREST), "y": CODE_FORMAT,
+    bits = 16 if params.period is None else TURN.int_bits
+    return {"x": QFormat(bits, 0), "x3": QFormat(bits, 0, Rounding.NEAREST), "y": CODE_FORMAT,
             "threshold": QFormat(int_bits, frac, Rounding.NEAREST)}
 
 
@@ -320,6 +391,9 @@ def _validate(config):
 
 
 def _random_params(rng):
+    if rng.random() < 0.25:  # an angle: a heading in 0.01 deg codes, a binary angle, a small turn
+        period = float(rng.choice([36000, 65536, 2 * int(rng.integers(200, 20000))]))
+        return Tukey53HParams(threshold=float(rng.uniform(0.3, period / 5)), period=period)
     return Tukey53HParams(threshold=float(rng.choice([rng.uniform(0.3, 20.0), rng.uniform(20.0, 5000.0)])))
 
 
@@ -327,7 +401,12 @@ def _goals(config, variant, channels=1):
     """No multiplier; 1,400 logic cells for one channel (11 comparators and their multiplexers,
     14 pipeline stages), each further channel about two cells per state bit (its registers,
     their read multiplexer and write enable: 260 for the 8 samples and the flag); every path
-    within the board's timing goal (62.5 MHz estimated)."""
+    within the board's timing goal (62.5 MHz estimated). An angle (``period``) stores 18-bit values
+    and moves them by a turn (eight adders and their multiplexers, the turn's tests, the output's
+    wrap): 2,000 cells and 300 per further channel."""
+    if config.params.period is not None:
+        return {"logic_cells": 2000 + 300 * (channels - 1), "mul18": 0, "lut_levels": 12,
+                "worst_path_ns": WORST_PATH_GOAL_NS}
     return {"logic_cells": 1400 + 260 * (channels - 1), "mul18": 0, "lut_levels": 10, "worst_path_ns": WORST_PATH_GOAL_NS}
 
 

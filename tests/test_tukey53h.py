@@ -327,3 +327,75 @@ def test_core_decides_at_the_threshold(channels, seed):
     np.testing.assert_array_equal(out[spikes + th.DELAY] != y[spikes], np.abs(d) > t)  # the paper's test
     assert (d < -t).any() and (d > t).any() and (np.abs(d) <= t).any()
     run_core(CONFIG, "online", y, seed=seed, channels=channels, p_idle=0.2, p_ready=0.6)  # every output the model's
+
+
+# -- angles: a period ---------------------------------------------------------------------------------
+
+ANGLE = FilterConfig(filter="tukey53h", params=th.Tukey53HParams(threshold=300.0, period=36000.0))
+
+
+def _heading(seed, n=400):
+    """A heading in 0.01 deg codes turning through +-180 deg several times (both ways), with
+    noise; codes in [-18000, 18000)."""
+    rng = np.random.default_rng(seed)
+    turn = np.cumsum(np.where(np.arange(n) % 200 < 100, 37.0, -41.0) + rng.normal(0, 5, n)) + 17000
+    return ((np.round(turn) + 18000) % 36000 - 18000).astype(np.int64)
+
+
+def test_a_heading_crossing_half_a_turn_passes_unchanged(seed):
+    """179.90 deg to -179.90 deg: every output the sample 4 before (once the 53H folded it in
+    half: 179.90 -> 89.83)."""
+    h = _heading(seed)
+    assert np.any(np.abs(np.diff(h)) > 18000)  # it crosses
+    out = FixedModel(ANGLE).run(h).y
+    np.testing.assert_array_equal(out[th.DELAY:], h[:-th.DELAY])
+    np.testing.assert_array_equal(th.reference(ANGLE.params, "online", h)["y"][th.DELAY:], h[:-th.DELAY])
+    folded = FixedModel(FilterConfig(filter="tukey53h", params=th.Tukey53HParams(threshold=300.0))).run(h).y
+    assert np.any(folded[th.DELAY:] != h[:-th.DELAY])  # without the period it does not
+
+
+def test_outliers_next_to_the_crossing_are_found(seed):
+    rng = np.random.default_rng(seed)
+    h = _heading(seed)
+    cross = np.flatnonzero(np.abs(np.diff(h)) > 18000)
+    bad = h.copy()
+    hits = np.unique(np.clip(np.r_[cross, cross + 1], 10, len(h) - 10))  # runs of 2 across each crossing
+    bad[hits] = (bad[hits] + rng.choice([-1, 1], len(hits)) * 3000 + 18000) % 36000 - 18000
+    out = FixedModel(ANGLE).run(bad).y[th.DELAY:]
+    # each outlier replaced: within the threshold of the clean heading, across the wrap
+    d = (out[hits] - h[hits] + 18000) % 36000 - 18000
+    assert np.all(np.abs(d) <= ANGLE.params.threshold), d
+    # the definition on the unwrapped heading, x3 rounded as the model rounds it, wrapped back
+    defined = th._online_float(np.unwrap(bad.astype(float), period=36000), 300.0, lambda v: np.floor(v + 0.5))[0]
+    np.testing.assert_array_equal(out, ((defined + 18000) % 36000 - 18000)[th.DELAY:])
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [({"period": 36001}, "period must be an even integer"),
+                                                  ({"period": 70000}, "period must be an even integer 4..65536"),
+                                                  ({"period": 1000, "threshold": 300}, "below a quarter of the period")])
+def test_bad_period(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        th.Tukey53HParams(**{"threshold": 10.0, **kwargs})
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_angle_core_bit_exact(channels, seed):
+    rng = np.random.default_rng(seed)
+    h = np.concatenate([_heading(seed, 300), glitchy(rng, 300)])
+    report = run_core(ANGLE, "online", h, seed=seed, channels=channels, p_idle=0.2, p_ready=0.6)
+    assert report["compared"] == 600 and report["mismatches"] == 0
+
+
+@pytest.mark.cosim
+@pytest.mark.parametrize("simulator", ["verilator", "icarus"])
+def test_angle_core_bit_exact_in_cocotb(simulator, seed):
+    """The generated Verilog with a period, two channels, on both simulators: every integer the model's."""
+    from kfpga.sim.runner import build, run
+
+    need(simulator)
+    h = _heading(seed, 400)
+    result = run(build(simulator, "core", config=ANGLE, variant="online", channels=2), "test_core",
+                 testcase="core_bit_exact",
+                 params={"variant": "online", "seed": seed, "codes": [int(c) for c in h], "channels": 2,
+                         "p_idle": 0.2, "p_ready": 0.7, "config_toml": ANGLE.to_toml()}, tag="53h-angle")
+    assert result["ok"] and result["mismatches"] == 0 and result["samples"] == 400, result.get("first_mismatches")
