@@ -18,7 +18,6 @@ from amaranth import Cat, Const, Module, Mux, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from kfpga.core.ads8364 import CODE_FORMAT
 from kfpga.core.ops import Fx
 from kfpga.hw.arith import NO_OVERFLOW, AmaranthOps, any_flag, live_flags
 from kfpga.hw.layouts import channel_bits, input_layout, output_layout
@@ -220,7 +219,8 @@ class LoopPipeline(Core):
         with m.If(take):
             m.d.sync += [s0_valid.eq(self.i.valid), s0.eq(self.i.payload)]
 
-        live = {name: Fx(getattr(s0, name).as_signed(), 0, None, CODE_FORMAT, name) for name in self.config.inputs}
+        live = {name: Fx(getattr(s0, name).as_signed(), 0, None, self.config.input_format, name)
+                for name in self.config.inputs}
         if in_memory:
             memory = StateMemory(self.channels, {n: self.config.point_format(p) for n, p in self.state_points.items()},
                                  self.reset_state)

@@ -5,8 +5,6 @@ from __future__ import annotations
 from amaranth import signed, unsigned
 from amaranth.lib import data
 
-from kfpga.core.ads8364 import CODE_FORMAT
-
 __all__ = ["channel_bits", "input_layout", "output_layout"]
 
 
@@ -20,10 +18,10 @@ def channel_bits(channels):
 
 
 def input_layout(config, channels, bits=None):
-    """``channel`` (``bits`` wide, default :func:`channel_bits`) and one signed 16-bit field per
-    input of the filter (``y`` for one input)."""
+    """``channel`` (``bits`` wide, default :func:`channel_bits`) and one signed field per input of
+    the filter (``y`` for one input): 16 bits, the ADC's code, or the config's wider input format."""
     fields = {"channel": unsigned(channel_bits(channels) if bits is None else bits)}
-    fields.update({name: signed(CODE_FORMAT.width) for name in config.inputs})
+    fields.update({name: signed(config.input_format.width) for name in config.inputs})
     return data.StructLayout(fields)
 
 

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 from amaranth import Const, Module, Signal
 
-from kfpga.core.ads8364 import CODE_FORMAT
 from kfpga.core.ops import Fx
 from kfpga.hw.arith import any_flag
 from kfpga.hw.core import Core, register_stage, write_estimate
@@ -125,7 +124,7 @@ class OnlineCore(Core):
             m.d.sync += [s0_valid.eq(self.i.valid), s0.eq(self.i.payload)]
 
         valid, channel = s0_valid, s0.channel
-        live = {"y": Fx(s0.y.as_signed(), 0, None, CODE_FORMAT, "y")}
+        live = {"y": Fx(s0.y.as_signed(), 0, None, self.config.input_format, "y")}
         pending = []  # overflow flags not yet in a register bit
         in_range = channel < self.channels if 1 < self.channels < 2 ** len(channel) else Const(1, 1)
         for n, (_, lines, step) in enumerate(self._stages, start=1):

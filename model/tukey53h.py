@@ -51,7 +51,6 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from kfpga.core.ads8364 import CODE_FORMAT, CODE_MAX
 from kfpga.core.board import WORST_PATH_GOAL_NS
 from kfpga.core.fixed import QFormat, Rounding
 from kfpga.core.formats import precision_frac_bits
@@ -60,20 +59,21 @@ from kfpga.core.spec import Constant, FilterSpec, Mode, MutationBlock, Output, P
 
 __all__ = ["Tukey53HParams", "SPEC", "POINTS", "FLAG", "DELAY", "MIN_OFFLINE", "update", "median5", "median3",
            "MEDIAN5", "MEDIAN3", "network_layer", "network_reads", "hanning_partial", "hanning", "residual", "decide",
-           "window_step", "primed_line", "reference", "offline", "velocity_threshold", "attitude_threshold"]
+           "window_step", "primed_line", "reference", "offline", "velocity_threshold", "attitude_threshold",
+           "position_threshold", "turn_format", "MAX_INPUT_BITS"]
 
 #: Samples from an input to the output that decides it.
 DELAY = 4
 #: The shortest series :func:`offline` takes (its two reversed blocks of 8 must not overlap).
 MIN_OFFLINE = 16
-#: Largest threshold with a meaning: two 16-bit codes differ by at most this.
-MAX_THRESHOLD = float(2 * CODE_MAX + 1)
 #: The format of the "primed" flag of a channel's state (0 after reset, 1 once a sample came).
 FLAG = QFormat(2, 0)
-#: The format of a full turn of an angle (``period``) and the shifts by it: up to 65536 codes.
-TURN = QFormat(18, 0)
-#: The largest period: the 16-bit codes' own turn.
-MAX_PERIOD = 65536
+def turn_format(params):
+    """The format of a full turn of an angle (``period``) and of the stored values it moves:
+    two bits above the samples'."""
+    return QFormat(params.input_bits + 2, 0)
+#: The widest samples (``input_bits``): a latitude or longitude in 1e-7 deg needs 32.
+MAX_INPUT_BITS = 32
 
 
 def velocity_threshold(a_max, T, lsb):
@@ -82,6 +82,16 @@ def velocity_threshold(a_max, T, lsb):
     for name, value in (("a_max", a_max), ("T", T), ("lsb", lsb)):
         number(name, value, minimum=0.0, strict=True)
     return a_max * T / lsb
+
+
+def position_threshold(v_max, T, lsb, radius=6371000.0):
+    """``V_max T / R`` in codes of ``lsb`` degrees (a latitude or a longitude): the largest change
+    of a position angle in one sample at the ship's largest speed ``v_max`` (m/s) on a sphere of
+    ``radius`` metres (the paper: ``Tp = V_max / R``, with T = 1 s). A longitude moves faster by
+    1/cos(latitude): divide by it for a ship far from the equator."""
+    for name, value in (("v_max", v_max), ("T", T), ("lsb", lsb), ("radius", radius)):
+        number(name, value, minimum=0.0, strict=True)
+    return np.degrees(v_max * T / radius) / lsb
 
 
 def attitude_threshold(omega_max, T, lsb):
@@ -103,26 +113,36 @@ class Tukey53HParams:
         outlier and is replaced; > 0 and at most 65535 (two codes differ by no more).
     period:
         For an angle, the codes of a full turn (36000 for 0.01 deg codes, 65536 for a binary
-        angle): an even integer 4..65536, the threshold below a quarter of it; a heading that
-        crosses half a turn then passes unchanged (module docstring). ``None`` (the default):
-        not an angle.
+        angle): an even integer from 4 to 2**input_bits, the threshold below a quarter of it; a
+        heading that crosses half a turn then passes unchanged (module docstring). ``None`` (the
+        default): not an angle.
+    input_bits:
+        The samples' width, 16 (an ADC code, the default) to 32: navigation data that are not an
+        ADC code, such as a latitude or a longitude in 1e-7 deg (32 bits; the paper's threshold
+        ``V_max T / R``, :func:`position_threshold`). The core alone takes them; the board's ADC
+        gives 16.
 
     Raises ``TypeError`` for a value of the wrong type and ``ValueError`` for a wrong value.
     """
 
     threshold: float = 500.0
     period: float | None = None
+    input_bits: int = 16
 
     def __post_init__(self):
+        bits = self.input_bits
+        if not isinstance(bits, int) or isinstance(bits, bool) or not 16 <= bits <= MAX_INPUT_BITS:
+            raise ValueError(f"input_bits must be an integer 16..{MAX_INPUT_BITS}, not {bits!r}")
         value = number("threshold", self.threshold)
-        if not 0 < value <= MAX_THRESHOLD:
-            raise ValueError(f"threshold must be > 0 (in codes) and at most {MAX_THRESHOLD:g}, the largest difference "
-                             f"of two 16-bit codes, not {self.threshold!r}")
+        largest = float((1 << bits) - 1)
+        if not 0 < value <= largest:
+            raise ValueError(f"threshold must be > 0 (in codes) and at most {largest:g}, the largest difference "
+                             f"of two {bits}-bit samples, not {self.threshold!r}")
         object.__setattr__(self, "threshold", value)
         if self.period is not None:
             turn = number("period", self.period)
-            if turn != int(turn) or int(turn) % 2 or not 4 <= turn <= MAX_PERIOD:
-                raise ValueError(f"period must be an even integer 4..{MAX_PERIOD} (the codes of a full turn), not "
+            if turn != int(turn) or int(turn) % 2 or not 4 <= turn <= 1 << bits:
+                raise ValueError(f"period must be an even integer 4..{1 << bits} (the codes of a full turn), not "
                                  f"{self.period!r}")
             if value >= turn / 4:
                 raise ValueError(f"threshold must be below a quarter of the period ({turn / 4:g} codes), not "
@@ -281,10 +301,10 @@ def update(ops, k, x, u):
 def _constants(params):
     k = {"threshold": Constant(params.threshold, "threshold", "threshold")}
     if params.period is not None:
-        p = params.period
-        k.update(turn=Constant(p, TURN, "period"), minus_turn=Constant(-p, TURN, "-period"),
-                 half_turn=Constant(p / 2, TURN, "period/2"), minus_half_turn=Constant(-p / 2, TURN, "-period/2"),
-                 half_turn_less=Constant(p / 2 - 1, TURN, "period/2 - 1"), no_turn=Constant(0.0, TURN, "0"))
+        p, turn = params.period, turn_format(params)
+        k.update(turn=Constant(p, turn, "period"), minus_turn=Constant(-p, turn, "-period"),
+                 half_turn=Constant(p / 2, turn, "period/2"), minus_half_turn=Constant(-p / 2, turn, "-period/2"),
+                 half_turn_less=Constant(p / 2 - 1, turn, "period/2 - 1"), no_turn=Constant(0.0, turn, "0"))
     return k
 
 
@@ -372,8 +392,9 @@ def _points_for(params):
 def _ranges(params, stimulus=None):
     # a median selects a sample, a Hanning value lies between samples: nothing leaves the codes;
     # an angle's frame moves its stored values by up to a turn
-    stored = float(CODE_MAX) if params.period is None else float(CODE_MAX + params.period)
-    return {"x": stored, "x3": stored, "y": float(CODE_MAX), "threshold": params.threshold}
+    top = float((1 << (params.input_bits - 1)) - 1)
+    stored = top if params.period is None else top + params.period
+    return {"x": stored, "x3": stored, "y": top, "threshold": params.threshold}
 
 
 def _default_formats(params, ranges, *, operand_bits, state_frac):
@@ -381,8 +402,8 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
     many bits as it needs, and the fraction bits that hold it within 1 %."""
     frac = precision_frac_bits(params.threshold)
     int_bits = next(i for i in range(2, 20) if QFormat(i, frac).covers(params.threshold))
-    bits = 16 if params.period is None else TURN.int_bits
-    return {"x": QFormat(bits, 0), "x3": QFormat(bits, 0, Rounding.NEAREST), "y": CODE_FORMAT,
+    bits = params.input_bits if params.period is None else turn_format(params).int_bits
+    return {"x": QFormat(bits, 0), "x3": QFormat(bits, 0, Rounding.NEAREST), "y": QFormat(params.input_bits, 0),
             "threshold": QFormat(int_bits, frac, Rounding.NEAREST)}
 
 
@@ -427,10 +448,10 @@ def _scenario(name, n, seed, params):
     return late, inject_outliers(codes, seed, params.threshold)
 
 
-def inject_outliers(codes, seed, threshold, *, density=0.01, sizes=(3.0, 10.0, 50.0), burst=(1, 2)):
+def inject_outliers(codes, seed, threshold, *, density=0.01, sizes=(3.0, 10.0, 50.0), burst=(1, 2), bits=16):
     """``codes`` with seeded outliers: at ``density`` of the samples, a run of ``burst`` samples
     (each run's length drawn from it) offset by ``size * threshold`` (a size drawn from
-    ``sizes``, either sign), saturated to the 16-bit codes."""
+    ``sizes``, either sign), saturated to the ``bits``-bit samples."""
     rng = np.random.default_rng([seed, 53])
     out = np.array(codes, dtype=np.int64)
     n = out.shape[-1]
@@ -438,7 +459,8 @@ def inject_outliers(codes, seed, threshold, *, density=0.01, sizes=(3.0, 10.0, 5
     for s in starts:
         length = int(rng.choice(burst))
         offset = float(rng.choice(sizes)) * threshold * rng.choice([-1.0, 1.0])
-        out[..., s:s + length] = np.clip(np.round(out[..., s:s + length] + offset), -CODE_MAX - 1, CODE_MAX)
+        out[..., s:s + length] = np.clip(np.round(out[..., s:s + length] + offset), -(1 << (bits - 1)),
+                                         (1 << (bits - 1)) - 1)
     return out
 
 

@@ -86,6 +86,7 @@ def test_claim_verdicts():
     (["ls-frontend", "--table", "0.1:30,0.3:2,inf:5"], "Ns must be an integer >= 3"),
     (["ls-frontend", "--noise", "0"], "--noise must be in (0, 10] m/s, not 0"),
     (["53h", "--a-max", "-1"], "--a-max must be in (0, 100], not -1"),
+    (["53h", "--v-max", "0"], "--v-max must be in (0, 100], not 0"),
     (["53h", "--seeds", "1001"], "--seeds must be at most 1000, not 1001"),
     (["53h", "--seeds", "0"], "argument --seeds: must be an integer >= 1, not '0'"),
 ])

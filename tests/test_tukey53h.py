@@ -264,7 +264,7 @@ def test_evaluate_53h_cli(tmp_path, capsys, seed):
     assert cubic["removed_pct"] < 50 and cubic["distorted"] > h53["distorted"]
     limits = {r["case"]: r for r in result["limits"]}
     assert limits["runs of 1"]["removed_pct"] == 100.0 and limits["runs of 3"]["removed_pct"] < 50
-    assert result["comparators"]["median of 5"]["comparisons"] == 7 and len(result["claims"]) == 9
+    assert result["comparators"]["median of 5"]["comparisons"] == 7 and len(result["claims"]) == 10
     first = result["first_outlier"]  # the improved (offline) form restores an outlier as the first sample
     assert abs(first["offline"] - first["measured"]) <= first["threshold"] < abs(first["outlier"] - first["measured"])
 
@@ -398,4 +398,83 @@ def test_angle_core_bit_exact_in_cocotb(simulator, seed):
                  testcase="core_bit_exact",
                  params={"variant": "online", "seed": seed, "codes": [int(c) for c in h], "channels": 2,
                          "p_idle": 0.2, "p_ready": 0.7, "config_toml": ANGLE.to_toml()}, tag="53h-angle")
+    assert result["ok"] and result["mismatches"] == 0 and result["samples"] == 400, result.get("first_mismatches")
+
+
+# -- navigation data wider than an ADC code ------------------------------------------------------------
+
+#: A latitude in 1e-7 deg (32 bits) and the paper's threshold V_max T / R at 15 m/s
+LATITUDE = FilterConfig(filter="tukey53h", params=th.Tukey53HParams(
+    threshold=round(th.position_threshold(15.0, 1.0, 1e-7)), input_bits=32))
+
+
+def _latitude(seed, n=500):
+    """A ship at 10 m/s going north-east from 59.9 deg N, every second, in 1e-7 deg, with GNSS
+    noise of 2 m and a few outliers of 50 to 500 m."""
+    rng = np.random.default_rng(seed)
+    metres = 10.0 * np.cos(np.radians(45)) * np.arange(n) + rng.normal(0, 2.0, n)
+    lat = np.round((59.9 + np.degrees(metres / 6371000.0)) / 1e-7).astype(np.int64)
+    hits = rng.choice(np.arange(8, n - 8), 8, replace=False)
+    lat[hits] += np.round(rng.choice([-1, 1], 8) * rng.uniform(50, 500, 8) / 6371000.0 * 180 / np.pi / 1e-7).astype(int)
+    return lat, np.sort(hits)
+
+
+def test_position_threshold_is_vmax_t_over_r():
+    # 15 m/s over 1 s on the earth: 1.349e-4 deg, 1349 codes of 1e-7 deg
+    assert th.position_threshold(15.0, 1.0, 1e-7) == pytest.approx(15.0 / 6371000.0 * 180 / np.pi / 1e-7)
+    assert LATITUDE.formats["x"].width == 32 and LATITUDE.formats["y"].width == 32
+    assert LATITUDE.input_format.width == 32
+
+
+def test_latitude_outliers_removed_in_32_bits(seed):
+    lat, hits = _latitude(seed)
+    assert lat.max() > 2 ** 15 * 1000  # far beyond a 16-bit code
+    out = FixedModel(LATITUDE).run(lat).y[th.DELAY:]
+    fixed = lat[:-th.DELAY]
+    assert np.all(out[hits] != fixed[hits])  # every outlier replaced
+    changed = np.flatnonzero(out != fixed)
+    assert set(changed) == set(hits)  # and nothing else
+
+
+def test_wide_inputs_are_refused_on_the_board(tmp_path, capsys):
+    cfg = tmp_path / "lat.toml"
+    cfg.write_text('[filter]\nname = "53h"\n\n[model]\nthreshold = 1349\ninput_bits = 32\n')
+    assert main(["generate", "--config", str(cfg), "--out", str(tmp_path / "board"), "--quiet"]) == 2
+    assert "input_bits = 32: the board's ADS8364 gives 16-bit codes" in capsys.readouterr().err
+    assert not (tmp_path / "board").exists()
+    assert main(["generate", "--config", str(cfg), "--core-only", "--out", str(tmp_path / "core"), "--quiet"]) == 0
+    manifest = json.loads((tmp_path / "core" / "manifest.json").read_text())
+    assert "32" in json.dumps(manifest)
+
+
+def test_wide_input_csv(tmp_path, capsys):
+    lat, _ = _latitude(3, 40)
+    src, out = tmp_path / "lat.csv", tmp_path / "out.csv"
+    src.write_text("y\n" + "\n".join(str(v) for v in lat) + "\n")
+    cfg = tmp_path / "lat.toml"
+    cfg.write_text('[filter]\nname = "53h"\n\n[model]\nthreshold = 1349\ninput_bits = 32\n')
+    assert main(["filter", "--config", str(cfg), "--input", str(src), "--output", str(out)]) == 0
+    assert main(["filter", "--filter", "53h", "--input", str(src), "--output", str(out)]) == 2
+    assert "outside the signed 16-bit range" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("channels", [1, 2])
+def test_wide_core_bit_exact(channels, seed):
+    lat, _ = _latitude(seed, 400)
+    report = run_core(LATITUDE, "online", lat, seed=seed, channels=channels, p_idle=0.2, p_ready=0.6)
+    assert report["compared"] == 400 and report["mismatches"] == 0
+
+
+@pytest.mark.cosim
+@pytest.mark.parametrize("simulator", ["verilator", "icarus"])
+def test_wide_core_bit_exact_in_cocotb(simulator, seed):
+    """The generated Verilog with 32-bit inputs, a latitude in 1e-7 deg, on both simulators."""
+    from kfpga.sim.runner import build, run
+
+    need(simulator)
+    lat, _ = _latitude(seed, 400)
+    result = run(build(simulator, "core", config=LATITUDE, variant="online", channels=2), "test_core",
+                 testcase="core_bit_exact",
+                 params={"variant": "online", "seed": seed, "codes": [int(c) for c in lat], "channels": 2,
+                         "p_idle": 0.2, "p_ready": 0.7, "config_toml": LATITUDE.to_toml()}, tag="53h-wide")
     assert result["ok"] and result["mismatches"] == 0 and result["samples"] == 400, result.get("first_mismatches")

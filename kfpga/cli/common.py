@@ -306,6 +306,9 @@ def check_sensors(args, pre=None):
 def check_rate(args, config):
     """The board's sample rate against what the ADS8364 converts for ``--channels`` (at
     ``--ratio`` where the command has it): one line, exit 2, when it cannot."""
+    if config.input_format.width != 16:
+        raise UsageError(f"input_bits = {config.input_format.width}: the board's ADS8364 gives 16-bit codes; wider "
+                         "inputs are for the core alone (kfpga generate --core-only)")
     channels = 6 if args.channels == 6 or len(config.inputs) > 1 else 1
     try:
         config.board.check(channels, getattr(args, "ratio", 10), sensors(args))
@@ -474,7 +477,7 @@ def check_signal_args(args):
 def _file_samples(args, config, command, need_truth, notes):
     from kfpga.core.csvio import read_samples
 
-    samples = read_samples(args.input, clip=args.clip, columns=config.inputs)
+    samples = read_samples(args.input, clip=args.clip, columns=config.inputs, bits=config.input_format.width)
     y, truth = samples.y, samples.truth
     if args.samples:
         if args.samples > len(samples):

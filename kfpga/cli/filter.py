@@ -53,7 +53,7 @@ def run(args):
     config = common.load_config(args)
     chosen = _mode(args, config)
     columns_in = chosen[0].columns(config, chosen[1]) if chosen else config.inputs
-    samples = read_samples(args.input, clip=args.clip, columns=columns_in)
+    samples = read_samples(args.input, clip=args.clip, columns=columns_in, bits=config.input_format.width)
     kind = "float64" if args.float else "bit-accurate fixed-point"
     if chosen:
         mode, value = chosen

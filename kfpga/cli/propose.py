@@ -66,7 +66,7 @@ def _files(args, config):
 
     signals = []
     for path in args.input:
-        samples = read_samples(path, clip=args.clip, columns=config.inputs)
+        samples = read_samples(path, clip=args.clip, columns=config.inputs, bits=config.input_format.width)
         if samples.truth is None:
             raise UsageError(f"propose needs a truth to measure RMSE: {path} has no 'truth' column")
         n = min(args.samples or len(samples), len(samples))

@@ -144,6 +144,16 @@ class FilterConfig:
 
     # -- the model's interface ----------------------------------------------------------
     @property
+    def input_format(self):
+        """The format of every input: the ADC's signed 16-bit code, or a wider integer where the
+        filter's parameters ask for one (``input_bits``: data that are not an ADC code, such as a
+        latitude in 1e-7 deg; the core alone takes them, the board's ADC cannot)."""
+        from kfpga.core.ads8364 import CODE_FORMAT
+
+        bits = getattr(self.params, "input_bits", CODE_FORMAT.width)
+        return CODE_FORMAT if bits == CODE_FORMAT.width else QFormat(bits, 0)
+
+    @property
     def inputs(self):
         """The names of the samples of one update (``("y",)`` for one observation)."""
         return tuple(name for name, _ in self.spec.inputs_for(self.params))
@@ -233,9 +243,7 @@ class FilterConfig:
         ops = WidthOps(self.formats)
         k = ops.constants(v.constants(self.params))
         x = {name: ops.input(None, point, name) for name, point in v.state_for(self.params)}
-        from kfpga.core.ads8364 import CODE_FORMAT
-
-        u = {name: ops.input(None, CODE_FORMAT, name) for name in self.inputs}
+        u = {name: ops.input(None, self.input_format, name) for name in self.inputs}
         v.update(ops, k, x, u)
         return ops.report
 

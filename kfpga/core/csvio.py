@@ -101,8 +101,9 @@ def read_table(path, *, single="y", unnamed=False):
     return Table(names, rows, header, separator, lines[0][0])
 
 
-def read_samples(path, *, clip=False, column="y", columns=None):
-    """Read the ``y`` column (signed 16-bit ADC codes), or each of ``columns``, and ``truth`` if present.
+def read_samples(path, *, clip=False, column="y", columns=None, bits=16):
+    """Read the ``y`` column (signed 16-bit ADC codes, or ``bits``-bit integers), or each of
+    ``columns``, and ``truth`` if present.
 
     The file is read by :func:`read_table` (comments, separators, a headerless single column).
     Every problem raises :class:`InputError` with the file and line: no such file, a folder,
@@ -124,6 +125,7 @@ def read_samples(path, *, clip=False, column="y", columns=None):
             f"no columns named {' and '.join(repr(c) for c in missing)}"
         raise InputError(f"{path}: line {table.line}: {need} (the header has: {', '.join(names) or 'nothing'})")
     index = {c: names.index(c) for c in wanted}
+    low, high = (CODE_MIN, CODE_MAX) if bits == 16 else (-(1 << (bits - 1)), (1 << (bits - 1)) - 1)
     it = names.index("truth") if "truth" in names else None
     for line, row in table.rows:
         where = f"{path}: line {line}"
@@ -132,14 +134,15 @@ def read_samples(path, *, clip=False, column="y", columns=None):
                 raise InputError(f"{where}: no value in column {name!r}")
             value = _number(row[iy], where, name)
             if value != int(value):
-                raise InputError(f"{where}: {name} = {row[iy].strip()} is not an integer ADC code")
-            if not CODE_MIN <= value <= CODE_MAX:
+                raise InputError(f"{where}: {name} = {row[iy].strip()} is not an integer "
+                                 + ("ADC code" if bits == 16 else "sample"))
+            if not low <= value <= high:
                 if not clip:
                     raise InputError(
-                        f"{where}: {name} = {row[iy].strip()} is outside the signed 16-bit range "
-                        f"[{CODE_MIN}, {CODE_MAX}] (use --clip to saturate such values)"
+                        f"{where}: {name} = {row[iy].strip()} is outside the signed {bits}-bit range "
+                        f"[{low}, {high}] (use --clip to saturate such values)"
                     )
-                value = min(max(value, CODE_MIN), CODE_MAX)
+                value = min(max(value, low), high)
                 clipped += 1
             codes[name].append(int(value))
         if it is not None:

@@ -92,7 +92,7 @@ class FixedModel:
         if vector not in self._kernels:
             self._kernels[vector] = compile_stage(
                 self._v.update, self.config.formats, constants=self.constants, state=self.state,
-                inputs=tuple((name, CODE_FORMAT) for name in self.inputs), outputs=self.outputs, vector=vector)
+                inputs=tuple((name, self.config.input_format) for name in self.inputs), outputs=self.outputs, vector=vector)
         return self._kernels[vector]
 
     def initial_state(self, batch_shape=()):
@@ -115,9 +115,10 @@ class FixedModel:
             a = np.asarray(y[name])
             if a.dtype.kind not in "iu":
                 raise TypeError(f"{name} must hold integer ADC codes, not {a.dtype}")
-            if a.size and (a.min() < CODE_FORMAT.min_raw or a.max() > CODE_FORMAT.max_raw):
-                raise ValueError(f"{name} must be within the signed 16-bit ADC range "
-                                 f"[{CODE_FORMAT.min_raw}, {CODE_FORMAT.max_raw}]")
+            fmt = self.config.input_format
+            if a.size and (a.min() < fmt.min_raw or a.max() > fmt.max_raw):
+                what = "the signed 16-bit ADC range" if fmt == CODE_FORMAT else f"the signed {fmt.width}-bit inputs"
+                raise ValueError(f"{name} must be within {what} [{fmt.min_raw}, {fmt.max_raw}]")
             out[name] = a.astype(np.int64)
         shapes = {a.shape for a in out.values()}
         if len(shapes) != 1:
@@ -202,7 +203,7 @@ class FixedModel:
             ops = backend(self.config.formats)
             k = ops.constants(self.constants)
             xs = {name: ops.input(x[name], points[name], name) for name in self.state_names}
-            u = {name: ops.input(codes[name][..., t], CODE_FORMAT, name) for name in self.inputs}
+            u = {name: ops.input(codes[name][..., t], self.config.input_format, name) for name in self.inputs}
             nxt, o = self._v.update(ops, k, xs, u)
             x = {name: raw_of(ops, nxt[name]) for name in self.state_names}
             for name in self.outputs:

@@ -694,9 +694,7 @@ def update_cost(config, variant):
     ops = CostOps(config.formats)
     k = ops.constants(config.constants(variant))
     state = {name: ops.input(0, point, name) for name, point in spec_variant.state_for(config.params)}
-    from kfpga.core.ads8364 import CODE_FORMAT
-
-    inputs = {name: ops.input(0, CODE_FORMAT, name) for name in config.inputs}
+    inputs = {name: ops.input(0, config.input_format, name) for name in config.inputs}
     spec_variant.update(ops, k, state, inputs)
     return dict(ops.counts)
 

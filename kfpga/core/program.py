@@ -27,7 +27,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from kfpga.core.ads8364 import CODE_FORMAT
 from kfpga.core.fixed import Overflow, Rounding
 from kfpga.core.ops import Fx, Ops, const_width, quotient_bits
 
@@ -185,7 +184,7 @@ def build_program(config, variant, *, channels=1, channel_bits=None):
     k = ops.constants(config.constants(variant))
     states = spec_variant.state_for(config.params)
     x = {name: ops.input(("state", name), config.point_format(point), name) for name, point in states}
-    u = {name: ops.input(("sample", name), CODE_FORMAT, name) for name in config.inputs}
+    u = {name: ops.input(("sample", name), config.input_format, name) for name in config.inputs}
     x_next, outs = spec_variant.update(ops, k, x, u)
     nodes = ops.nodes
     results = [(name, outs[name]) for name in (o.name for o in config.outputs)]

@@ -21,8 +21,10 @@ class NavigationScenario:
     A ship at 6 m/s turns from 40 to 130 deg at 0.5 deg/s, speeds up to 9 m/s at 0.02 m/s^2,
     turns back to 70 deg; the sea adds a yaw of 1.5 deg (period 12 s) and a surge of 0.1 m/s
     (period 8 s); the sensors add white noise (0.01 m/s, 0.05 deg). Codes: 1 mm/s and
-    0.01 deg. Thresholds from the physical limits (the paper, §3): ``a_max T`` for the
-    velocities, ``omega_max T`` for the heading.
+    0.01 deg (a heading: its period is 36000 codes), latitude and longitude from 59.9 deg N,
+    10.7 deg E in 1e-7 deg (32-bit samples, INS position noise 1 m). Thresholds from the
+    physical limits (the paper, §3): ``a_max T`` for the velocities, ``omega_max T`` for the
+    heading, ``V_max T / R`` for latitude and longitude.
 
     Outliers (seeded): at ``density`` of the samples a run of ``burst`` samples (each run's
     length drawn from it) is offset by ``size * threshold``, a size drawn from ``sizes``, of
@@ -35,6 +37,9 @@ class NavigationScenario:
     omega_max: float = 3.0  # deg/s
     velocity_lsb: float = 0.001  # m/s per code
     heading_lsb: float = 0.01  # deg per code
+    position_lsb: float = 1e-7  # deg per code of latitude and longitude (32-bit samples)
+    v_max: float = 12.0  # m/s: the position's threshold V_max T / R
+    position_noise: float = 1.0  # m
     density: float = 0.01
     sizes: tuple = (3.0, 10.0, 50.0)
     burst: tuple = (1, 2)
@@ -47,8 +52,9 @@ class NavigationScenario:
 
 
 def navigation_signals(s, rng):
-    """``{signal: (truth in codes (float), measured codes, threshold in codes, lsb, unit)}``: the
-    noise-free signal and what the sensor gives before any outlier."""
+    """``{signal: (truth in codes (float), measured codes, threshold in codes, lsb, unit, params)}``:
+    the noise-free signal, what the sensor gives before any outlier, and the smoother's other
+    parameters (the heading's period, the positions' 32-bit samples)."""
     t = np.arange(s.seconds) * s.T
     n = len(t)
 
@@ -61,15 +67,30 @@ def navigation_signals(s, rng):
     truth = {"east velocity": speed * np.sin(psi) / s.velocity_lsb, "north velocity": speed * np.cos(psi) / s.velocity_lsb,
              "heading": heading / s.heading_lsb}
     noise = {"east velocity": 0.01 / s.velocity_lsb, "north velocity": 0.01 / s.velocity_lsb, "heading": 0.05 / s.heading_lsb}
-    from kfpga.model.tukey53h import attitude_threshold, velocity_threshold
+    from kfpga.model.tukey53h import attitude_threshold, position_threshold, velocity_threshold
 
-    vt = velocity_threshold(s.a_max, s.T, s.velocity_lsb)
-    ht = attitude_threshold(s.omega_max, s.T, s.heading_lsb)
+    radius = 6371000.0
+    north = np.cumsum(speed * np.cos(psi)) * s.T
+    east = np.cumsum(speed * np.sin(psi)) * s.T
+    lat = 59.9 + np.degrees(north / radius)
+    lon = 10.7 + np.degrees(east / (radius * np.cos(np.radians(lat))))
+    truth.update({"latitude": lat / s.position_lsb, "longitude": lon / s.position_lsb})
+    metre = np.degrees(1.0 / radius) / s.position_lsb
+    noise.update({"latitude": s.position_noise * metre, "longitude": s.position_noise * metre / np.cos(np.radians(59.9))})
+    thresholds = {"east velocity": velocity_threshold(s.a_max, s.T, s.velocity_lsb),
+                  "north velocity": velocity_threshold(s.a_max, s.T, s.velocity_lsb),
+                  "heading": attitude_threshold(s.omega_max, s.T, s.heading_lsb),
+                  "latitude": position_threshold(s.v_max, s.T, s.position_lsb),
+                  "longitude": position_threshold(s.v_max, s.T, s.position_lsb)}
+    # the figures of a position in metres: a code of latitude is R * 1e-7 deg, of longitude that times cos(lat)
+    lsb = {"heading": s.heading_lsb, "latitude": 1.0 / metre, "longitude": np.cos(np.radians(59.9)) / metre}
+    extra = {"latitude": {"input_bits": 32},
+             "longitude": {"input_bits": 32}}
     out = {}
     for name, clean in truth.items():
         measured = np.round(clean + rng.normal(0, noise[name], n)).astype(np.int64)
-        vel = name != "heading"
-        out[name] = (clean, measured, vt if vel else ht, s.velocity_lsb if vel else s.heading_lsb, "m/s" if vel else "deg")
+        unit = "m/s" if "velocity" in name else "deg" if name == "heading" else "m"
+        out[name] = (clean, measured, thresholds[name], lsb.get(name, s.velocity_lsb), unit, extra.get(name, {}))
     return out
 
 
@@ -138,9 +159,11 @@ def tukey53h(scenario=None, *, seed):
     rng = np.random.default_rng(seed)
     signals = navigation_signals(s, rng)
     rows, series = [], {}
-    for i, (name, (truth, measured, threshold, lsb, unit)) in enumerate(signals.items()):
-        raw = th.inject_outliers(measured, seed * 16 + i, threshold, density=s.density, sizes=s.sizes, burst=s.burst)
-        config = FilterConfig(filter="53h", params=th.Tukey53HParams(threshold=threshold))
+    for i, (name, (truth, measured, threshold, lsb, unit, extra)) in enumerate(signals.items()):
+        params = th.Tukey53HParams(threshold=threshold, **extra)
+        raw = th.inject_outliers(measured, seed * 16 + i, threshold, density=s.density, sizes=s.sizes, burst=s.burst,
+                                 bits=params.input_bits)
+        config = FilterConfig(filter="53h", params=params)
         model = FixedModel(config)
         n = len(raw)
         online = model.run(raw).y
@@ -174,7 +197,7 @@ def _limits(s, signal, seed):
     from kfpga.core.fixedmodel import FixedModel
     from kfpga.model import tukey53h as th
 
-    truth, measured, threshold, lsb, _ = signal
+    truth, measured, threshold, lsb, _, _ = signal
     model = FixedModel(FilterConfig(filter="53h", params=th.Tukey53HParams(threshold=threshold)))
     cases = [(f"runs of {b}", 0.01, (10.0,), (b,)) for b in (1, 2, 3, 4)]
     cases += [(f"size {z:g} x threshold", 0.01, (z,), (1,)) for z in (1.2, 2.0, 5.0)]
@@ -218,7 +241,7 @@ def tukey53h_table(result):
         false = "all" if "53H" not in r["method"] and not r["method"].startswith("raw") else str(r["false_replacements"])
         lines.append(f"{r['signal']:<15} {r['method']:<43} {r['outliers']:>8} {removed:>8} {false:>6} "
                      f"{r['distorted']:>9} {r['rmse']:>9.4f} {r['rmse_inliers']:>9.4f} {delay:>6}")
-    lines += ["", "RMSE against the noise-free signal in m/s or deg (all samples, and inliers only); removed: outliers "
+    lines += ["", "RMSE against the noise-free signal in m/s, deg or m (all samples, and inliers only); removed: outliers "
               "ending within the threshold of the noise-free value; false: inliers changed (a smoother changes all); "
               "distorted: inliers left further than the threshold from the noise-free value; delay in samples.", "",
               "what 53H removes (offline, bit-accurate, east velocity):",
@@ -236,6 +259,11 @@ def tukey53h_table(result):
     return "\n".join(lines)
 
 
+#: The signals of the paper's figs. 5-6 (velocity) and heading, and the positions of its sec. 3.
+FIGURES = ("east velocity", "north velocity", "heading")
+POSITIONS = ("latitude", "longitude")
+
+
 def _first_outlier(s, signal, seed):
     """The east velocity with an outlier (10 thresholds) as its very first sample: what the online
     and the offline 53H (bit-accurate) give at sample 0, against the measured value."""
@@ -243,7 +271,7 @@ def _first_outlier(s, signal, seed):
     from kfpga.core.fixedmodel import FixedModel
     from kfpga.model import tukey53h as th
 
-    _, measured, threshold, _, _ = signal
+    _, measured, threshold, _, _, _ = signal
     raw = measured.copy()
     raw[0] = np.clip(raw[0] + (10 if seed % 2 else -10) * threshold, -32768, 32767)
     model = FixedModel(FilterConfig(filter="53h", params=th.Tukey53HParams(threshold=threshold)))
@@ -264,13 +292,13 @@ def tukey53h_claims(options, result, runs):
     cubic = next(m for m in methods if "cubic" in m)
     wls = next(m for m in methods if "weighted" in m)
 
-    def per_run(method, key, pick):
-        return [pick(r[key] for r in run["rows"] if r["method"] == method) for run in runs]
+    def per_run(method, key, pick, signals=FIGURES):
+        return [pick(r[key] for r in run["rows"] if r["method"] == method and r["signal"] in signals) for run in runs]
 
     removed = {m: per_run(m, "removed_pct", min) for m in (online, offline, cubic, wls)}
     false = {m: per_run(m, "false_replacements", max) for m in (online, offline)}
     distorted = {m: per_run(m, "distorted", max) for m in (offline, cubic, wls)}
-    signals = list(dict.fromkeys(r["signal"] for r in result["rows"]))
+    signals = FIGURES
 
     def below_raw(run):
         rmse = {(r["signal"], r["method"]): r["rmse"] for r in run["rows"]}
@@ -278,8 +306,11 @@ def tukey53h_claims(options, result, runs):
 
     first = [run["first_outlier"] for run in runs]
     runs3 = [next(r for r in run["limits"] if r["case"] == "runs of 3")["removed_pct"] for run in runs]
+    position = {key: per_run(offline, key, pick, POSITIONS) for key, pick in (("removed_pct", min),
+                                                                              ("false_replacements", max))}
+    by_signal = {sig: per_run(offline, "removed_pct", min, (sig,)) for sig in POSITIONS}
     return [
-        Claim("the improved 53H removes every outlier (figs. 5-6)", "all removed (curves)",
+        Claim("the improved 53H removes every outlier (figs. 5-6; velocities and heading)", "all removed (curves)",
               [a == 100.0 and b == 100.0 for a, b in zip(removed[online], removed[offline], strict=True)],
               f"removed at worst over the three signals: online {spread(removed[online])} %, offline "
               f"{spread(removed[offline])} %", "single outliers and runs of 2 at 1 % of the samples; runs of 3 pass "
@@ -311,6 +342,15 @@ def tukey53h_claims(options, result, runs):
               f"{sum(f['online_false'] > 0 for f in first)} of them",
               "held when the offline form restores it. The online core cannot: the paper's reversal of the first 8 "
               "samples needs 8 samples before the first output, and the core keeps its fixed 4-sample delay"),
+        Claim("latitude and longitude: the threshold V_max T / R finds their outliers (sec. 3)", "Tp = V_max / R",
+              [r == 100.0 and f == 0 for r, f in zip(position["removed_pct"], position["false_replacements"],
+                                                      strict=True)],
+              "offline, 32-bit samples of 1e-7 deg, V_max = 12 m/s: removed " + ", ".join(
+                  f"{sig} {spread(v, '.3g')} %" for sig, v in by_signal.items())
+              + f"; false replacements {spread(position['false_replacements'], '.3g')}",
+              "at 59.9 deg N a longitude moves 1/cos(lat) = 2x faster than a latitude: at 9 m/s east the ship moves "
+              "further in one second than the threshold, and the median's value near an outlier is off by that "
+              "step; position_threshold() / cos(lat) is the longitude's"),
         Claim("the method needs neither normally distributed data nor their standard deviation (introduction)",
               "a property of the median", None, "the thresholds here come from a_max T and omega_max T only",
               "a property of the algorithm, not a figure: no run can fail it"),
@@ -354,6 +394,8 @@ def _add_arguments(parser):
                                                                   "velocities' threshold a_max T (default: 0.5)")
     parser.add_argument("--omega-max", type=float, metavar="DEG_S", help="its largest turn rate, deg/s: the heading's "
                                                                        "threshold omega_max T (default: 3)")
+    parser.add_argument("--v-max", type=float, metavar="M_S", help="its largest speed, m/s: latitude's and "
+                                                                 "longitude's threshold V_max T / R (default: 12)")
     parser.add_argument("--density", type=float, metavar="P", help="share of the samples that start a run of "
                                                                  "outliers, 0..0.2 (default: 0.01)")
 
@@ -361,8 +403,8 @@ def _add_arguments(parser):
 def _scenario(options):
     from kfpga.core.errors import UsageError
 
-    given = {k: getattr(options, k) for k in ("a_max", "omega_max", "density") if getattr(options, k) is not None}
-    for key, top in (("a_max", 100.0), ("omega_max", 90.0), ("density", 0.2)):
+    given = {k: getattr(options, k) for k in ("a_max", "omega_max", "v_max", "density") if getattr(options, k) is not None}
+    for key, top in (("a_max", 100.0), ("omega_max", 90.0), ("v_max", 100.0), ("density", 0.2)):
         if key in given and not 0.0 < given[key] <= top:
             raise UsageError(f"--{key.replace('_', '-')} must be in (0, {top:g}], not {given[key]:g}")
     return NavigationScenario(**given)
@@ -371,12 +413,13 @@ def _scenario(options):
 EVALUATION = Evaluation(
     summary="seeds/002: the 53H outlier smoother on a ship's navigation data against 5-point cubic smoothing and "
             "sliding weighted least squares",
-    description="A ship's INS east and north velocity and heading at 1 Hz for an hour (synthetic: turns, a speed "
-                "change, sea-induced yaw and surge, sensor noise), with seeded outliers of several sizes, single and "
-                "in runs of 2, smoothed by the online and the offline 53H (bit-accurate; thresholds a_max*T and "
-                "omega_max*T), the 5-point cubic smoothing and a sliding weighted least-squares filter. Prints, per "
-                "signal and method, the outliers removed, false replacements, distorted inliers, RMSE and delay; "
-                "what 53H cannot remove (runs of 3 and more, dense outliers); and how it compares with the paper.",
+    description="A ship's INS east and north velocity, heading, latitude and longitude at 1 Hz for an hour "
+                "(synthetic: turns, a speed change, sea-induced yaw and surge, sensor noise; positions in 32-bit "
+                "samples of 1e-7 deg), with seeded outliers of several sizes, single and in runs of 2, smoothed by "
+                "the online and the offline 53H (bit-accurate; thresholds a_max*T, omega_max*T and V_max*T/R), the "
+                "5-point cubic smoothing and a sliding weighted least-squares filter. Prints, per signal and method, "
+                "the outliers removed, false replacements, distorted inliers, RMSE and delay; what 53H cannot remove "
+                "(runs of 3 and more, dense outliers); and the paper's claims over the seeds.",
     add_arguments=_add_arguments,
     check=lambda options: _scenario(options),
     run=lambda options, seed: tukey53h(_scenario(options), seed=seed),
