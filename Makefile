@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 BUILD  := build
 
-.PHONY: demo test bench lint venv clean formal mutate mutate-source regress
+.PHONY: demo test docs bench lint venv clean formal mutate mutate-source regress
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -33,6 +33,11 @@ demo: $(STAMP)
 	done
 	@echo "fixed-vs-float reports: $(BUILD)/compare_*.txt, .json, .png; Verilog: $(BUILD)/steady, $(BUILD)/full;"
 	@echo "co-simulation: $(BUILD)/simulate_*.txt"
+
+# the manual (docs/, Sphinx with MyST Markdown) as HTML under build/docs; a warning is an error
+docs: $(STAMP)
+	$(BIN)/sphinx-build -W --keep-going -q -b html docs $(BUILD)/docs
+	@echo "manual: $(BUILD)/docs/index.html"
 
 bench: $(STAMP)
 	$(BIN)/python bench/bench_model.py

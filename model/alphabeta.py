@@ -1,4 +1,4 @@
-"""The alpha-beta tracker of seeds/004 (marine radar ARPA, SPEC §4): its equations and its spec.
+"""The alpha-beta tracker of seeds/004 (marine radar ARPA): its equations and its spec.
 
 Per axis of a track, with the measurement ``z`` and the sample period ``T``::
 

@@ -1,4 +1,4 @@
-"""Any linear state-space model: an n-state Kalman filter from F, G, Q, H, R (SPEC §1, §4, §8).
+"""Any linear state-space model: an n-state Kalman filter from F, G, Q, H, R.
 
 Model, with n = 1..4 states and m = 1..2 observations (each a 16-bit ADC code)::
 
@@ -1000,7 +1000,7 @@ def _error_std(params, *, measurement_only=False):
 SPEC = FilterSpec(
     name="kalman",
     summary="any linear state-space model: n = 1..4 states, m = 1..2 observations, from F, G, Q, H, R",
-    source="SPEC §1, §4, §8: the general form of seeds/000, 001, 003, 004",
+    source="your own linear state-space model: the general form of seeds/000, 001, 003 and 004",
     params=StateSpaceParams,
     points=POINTS,
     inputs=_inputs,

@@ -1,4 +1,4 @@
-"""The paper's 2-state Kalman filter (seeds/001, SPEC §1): its equations, once, and its spec.
+"""The paper's 2-state Kalman filter (seeds/001): its equations, once, and its spec.
 
 Both variants run in the datapath's units (``v = T*x2``, ``P' = D P D``, see
 :meth:`~kfpga.model.reference.KalmanParams.scaled`), so T never multiplies inside the loop.
@@ -13,7 +13,7 @@ Steady state (constant gains ``k1 = K1``, ``k2 = T*K2``, rounded into ``gain``):
     xl1 = [x1 + v]_xl1          e = [y - xl1]_e
     x1  = [xl1 + k1*e]_x1       v = [v + k2*e]_v          yhat = xl1
 
-Time-varying (SPEC §1 with the paper's two misprints corrected; ``Q' = T^2 Q`` in ``pl``,
+Time-varying (the paper's equations with its two misprints corrected; ``Q' = T^2 Q`` in ``pl``,
 ``R`` in ``s``)::
 
     xl1  = [x1 + v]_xl1

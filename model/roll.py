@@ -1,4 +1,4 @@
-"""The ship-roll "combined interval" Kalman predictor of seeds/000 (SPEC §4), in float.
+"""The ship-roll "combined interval" Kalman predictor of seeds/000, in float.
 
 The roll angle is sampled every ``T`` = 0.5 s. Two 3-state constant-acceleration filters take
 alternate samples (even and odd), so each sees one sample per ``2 T`` = 1 s, and each predicts

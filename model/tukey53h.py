@@ -1,4 +1,4 @@
-"""Tukey's 53H outlier smoother (seeds/002, SPEC §4): its equations, its online and offline forms, its spec.
+"""Tukey's 53H outlier smoother (seeds/002): its equations, its online and offline forms, its spec.
 
 For a series ``x``:
 

@@ -198,14 +198,14 @@ def test_filter_option_and_config_must_agree(capsys, tmp_path):
                                          "filter, not 'fast'")
 
 
-def test_readme_synopsis_is_the_parsers():
+def test_manual_synopsis_is_the_parsers():
     from pathlib import Path
 
     from kfpga.cli import synopsis
 
-    readme = (Path(__file__).parents[1] / "README.md").read_text()
-    block = readme.split("## Command line\n\n```\n", 1)[1].split("```", 1)[0]
-    assert block.rstrip("\n") == synopsis(), "README's command synopsis differs from the parser: regenerate it"
+    page = (Path(__file__).parents[1] / "docs" / "cli.md").read_text()
+    block = page.split("# Command line\n\n```\n", 1)[1].split("```", 1)[0]
+    assert block.rstrip("\n") == synopsis(), "docs/cli.md's command synopsis differs from the parser: regenerate it"
 
 
 def test_pins_write_follows_the_out_field_width(capsys, tmp_path):
@@ -273,14 +273,14 @@ def test_one_output_row_per_input_row_or_an_error(capsys, tmp_path):
     assert len(list(csv.DictReader(dst.open()))) == 5
 
 
-def test_readme_worked_example_runs_as_written(capsys, tmp_path, monkeypatch):
-    """The README's worked example (a 3-state tracker at T = 0.01 s): its config file and its
-    commands, in its order, in a fresh folder; the compare figure it prints is the run's."""
+def test_manual_worked_example_runs_as_written(capsys, tmp_path, monkeypatch):
+    """The manual's worked example (docs/own-model.md, a 3-state tracker at T = 0.01 s): its config
+    file and its commands, in its order, in a fresh folder; the compare figure it prints is the run's."""
     import shlex
     from pathlib import Path
 
-    readme = (Path(__file__).parents[1] / "README.md").read_text()
-    section = readme.split("### Worked example: your own tracker at T = 0.01 s", 1)[1]
+    page = (Path(__file__).parents[1] / "docs" / "own-model.md").read_text()
+    section = page.split("## Worked example: your own tracker at T = 0.01 s", 1)[1]
     toml = section.split("```toml\n", 1)[1].split("```", 1)[0]
     block = section.split("```sh\n", 1)[1].split("```", 1)[0]
     lines = [line.split("#", 1)[0].strip() for line in block.splitlines()]
@@ -296,7 +296,7 @@ def test_readme_worked_example_runs_as_written(capsys, tmp_path, monkeypatch):
     assert code == 0 and m["filter"] == "kalman" and m["overflows"] == 0 and (tmp_path / "build" / "tracker.png").is_file()
     assert abs(m["rmse_fixed_over_float"] - 1) <= 0.01, m["rmse_fixed_over_float"]
     printed = section.split("fixed model      ", 1)[1].split("codes", 1)[0].split()[0]
-    assert f"{m['rmse_fixed']:.4f}" == printed, "the README's compare output is stale"
+    assert f"{m['rmse_fixed']:.4f}" == printed, "docs/own-model.md's compare output is stale"
     code, _, err = run_cli(capsys, *generate[1:], "--no-lint", "--quiet")
     assert code == 0 and (tmp_path / "build" / "tracker" / "kfpga_top.v").is_file(), err
 

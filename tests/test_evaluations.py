@@ -157,29 +157,30 @@ def test_alpha_beta_tracks_start_from_their_first_two_plots():
     assert np.max(np.abs(v[:, 1])) < 10  # a plot's noise, never the position itself
 
 
-def _readme_claims():
-    """``{name: [(claim, verdict with its count), ...]}`` of the README's claims blocks."""
+def _manual_claims(name):
+    """``[(claim, verdict with its count), ...]`` of the claims block on the filter's page of the
+    manual (docs/filters/NAME.md), or ``None`` without one."""
     import re
     from pathlib import Path
 
-    text = (Path(__file__).parents[1] / "README.md").read_text()
-    out = {}
-    for name, body in re.findall(r"<!-- claims (\w+):.*?-->\n(.*?)<!-- /claims -->", text, flags=re.S):
-        rows = [line.split(" | ") for line in body.splitlines() if re.match(r"\| \d+ \| ", line)]
-        out[name] = [(row[1], row[4].split(":")[0].rstrip(" |")) for row in rows]
-    return out
+    text = (Path(__file__).parents[1] / "docs" / "filters" / f"{name}.md").read_text()
+    for block_name, body in re.findall(r"<!-- claims (\w+):.*?-->\n(.*?)<!-- /claims -->", text, flags=re.S):
+        if block_name == name:
+            rows = [line.split(" | ") for line in body.splitlines() if re.match(r"\| \d+ \| ", line)]
+            return [(row[1], row[4].split(":")[0].rstrip(" |")) for row in rows]
+    return None
 
 
 @pytest.mark.parametrize("name", EVALUATED)
-def test_readme_quotes_the_default_runs_verdicts(name, capsys):
-    """The README's verdicts are the default run's (20 seeds), claim by claim, count by count."""
-    quoted = _readme_claims()
-    assert name in quoted, f"README has no claims block for {name}: kfpga evaluate {name} --markdown"
+def test_manual_quotes_the_default_runs_verdicts(name, capsys):
+    """The manual's verdicts are the default run's (20 seeds), claim by claim, count by count."""
+    quoted = _manual_claims(name)
+    assert quoted is not None, f"docs/filters/{name}.md has no claims block: kfpga evaluate {name} --markdown"
     assert main(["evaluate", name, "--markdown", "--quiet"]) == 0
     ours = [(row[1], row[4].split(":")[0].rstrip(" |")) for row in
             (line.split(" | ") for line in capsys.readouterr().out.splitlines() if line.startswith("| ") and
              line.split(" | ")[0][2:].isdigit())]
-    assert len(ours) >= 3 and quoted[name] == ours, f"README's claims of {name} are stale: kfpga evaluate {name} --markdown"
+    assert len(ours) >= 3 and quoted == ours, f"docs/filters/{name}.md's claims are stale: kfpga evaluate {name} --markdown"
 
 
 def test_filter_tracks_start_each_track_from_its_first_two_plots(tmp_path, capsys):

@@ -50,6 +50,11 @@ def build_parser():
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for command in COMMANDS:
         command.add_parser(sub)
+        examples = getattr(command, "EXAMPLES", None)
+        if examples:
+            p = sub.choices[command.__name__.rsplit(".", 1)[1]]
+            p.epilog = "examples:\n" + "\n".join(f"  {line}" for line in examples)
+            p.formatter_class = common.ExamplesFormatter
     return parser
 
 

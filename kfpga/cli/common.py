@@ -203,6 +203,15 @@ def not_with(option, other, why):
 # -- help texts from the registry -------------------------------------------------------------------
 
 
+class ExamplesFormatter(argparse.HelpFormatter):
+    """argparse's formatter, but an ``examples:`` epilog keeps its lines as written."""
+
+    def _fill_text(self, text, width, indent):
+        if text.startswith("examples:"):
+            return "".join(indent + line for line in text.splitlines(keepends=True))
+        return super()._fill_text(text, width, indent)
+
+
 def filter_help():
     aliases = registry.aliases()
     also = f"; also {', '.join(f'{a} ({n})' for a, n in aliases.items())}" if aliases else ""
@@ -214,9 +223,16 @@ def variant_help():
     return f"the filter's variant ({'; '.join(parts)}; default: the first)"
 
 
+def _fields(spec):
+    """A filter's output fields for a help text: its own, or, where they follow the model (the
+    general filter: one per state and observation), the pattern."""
+    if callable(spec.outputs):
+        return "x1..xn and yhat1..yhatm of its n states and m observations"
+    return ", ".join(o.name for o in spec.outputs_for(spec.params()))
+
+
 def out_field_help():
-    parts = [f"{s.name}: {', '.join(o.name for o in s.outputs_for(s.params()))}, default {s.default_output}"
-             for s in registry.specs()]
+    parts = [f"{s.name}: {_fields(s)}, default {s.default_output}" for s in registry.specs()]
     return f"the output field that drives out_data ({'; '.join(parts)}); the pin table follows its width"
 
 

@@ -125,3 +125,10 @@ def _with_prefilter(args, config, pre, truth, y, label):
         raw = "-" if r["rmse_raw"] is None else f"{r['rmse_raw']:.4f}"
         print(f"    {text:<26}{raw:>11}{r['rmse_float']:>11.4f}{r['rmse_fixed']:>11.4f}{r['overflows']:>11}")
     return 0
+
+
+#: The examples ending ``kfpga compare --help``.
+EXAMPLES = (
+    "kfpga compare --seed 1 --plot build/compare.png        # the paper's filter, fixed against float",
+    'kfpga compare --config tracker.toml --json               # your model at its own sample period',
+)

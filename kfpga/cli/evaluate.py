@@ -4,7 +4,6 @@ them."""
 
 from __future__ import annotations
 
-import argparse
 import sys
 
 from kfpga.cli import common
@@ -29,14 +28,16 @@ def add_parser(sub):
                        epilog="examples:\n  kfpga evaluate roll                  # seeds 1..20, the claims table\n"
                               "  kfpga evaluate alpha-beta --seeds 5 --json\n"
                               "  kfpga evaluate 53h --seed 7 --plot 53h.png   # replay seed 7 alone",
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+                       formatter_class=common.ExamplesFormatter)
     ev = p.add_subparsers(dest="evaluation", metavar="NAME", required=True)
     for spec in registry.specs():
         evaluation = spec.load_evaluation()
         if evaluation is None:
             continue
         q = ev.add_parser(spec.name, aliases=list(spec.aliases), help=evaluation.summary,
-                          description=evaluation.description)
+                          description=evaluation.description, formatter_class=common.ExamplesFormatter,
+                          epilog=f"examples:\n  kfpga evaluate {spec.name}                 # seeds 1..20 and the claims\n"
+                                 f"  kfpga evaluate {spec.name} --seed 3 --plot build/{spec.name}.png")
         evaluation.add_arguments(q)
         q.add_argument("--seeds", type=common.int_at_least(1, "an integer >= 1"), metavar="N",
                        help=f"run N seeds, from --seed on (default: {DEFAULT_SEEDS} seeds, 1 .. {DEFAULT_SEEDS}; "

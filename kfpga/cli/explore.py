@@ -88,3 +88,10 @@ def _plot(found, need, path, title):
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
     save_figure(fig, path, dpi=110)
+
+
+#: The examples ending ``kfpga explore --help``.
+EXAMPLES = (
+    'kfpga explore --config tracker.toml --plot build/explore.png',
+    'kfpga explore --filter alpha-beta --channels 6 --json',
+)

@@ -76,3 +76,10 @@ def run(args):
         note.append(f"{int(np.count_nonzero(columns['overflow']))} sample(s) with overflow")
     common.info("; ".join(note))
     return 0
+
+
+#: The examples ending ``kfpga filter --help``.
+EXAMPLES = (
+    'kfpga filter --config tracker.toml --input log.csv --output estimates.csv',
+    'kfpga filter --filter alpha-beta --tracks 40 --input plots.csv --output tracks.csv',
+)

@@ -20,6 +20,7 @@ def run(args):
              "variants": {n: v.summary for n, v in s.variants.items()},
              "inputs": [n for n, _ in s.inputs_for(s.params())],
              "outputs": [o.name for o in s.outputs_for(s.params())], "source": s.source,
+             "outputs_follow_the_model": callable(s.outputs),
              "presets": {n: summary for n, (summary, _) in s.presets.items()},
              "evaluation": s.evaluation is not None, "scenarios": list(s.scenarios),
              "default": s.name == registry.DEFAULT} for s in registry.specs()]
@@ -31,10 +32,19 @@ def run(args):
         print(f"{r['name']:<10} {r['summary']}{' (default)' if r['default'] else ''}{also}")
         for name, summary in r["variants"].items():
             print(f"  --variant {name:<9} {summary}")
-        print(f"  inputs {', '.join(r['inputs'])}; outputs {', '.join(r['outputs'])}; scenarios "
+        outputs = (f"{', '.join(r['outputs'])} for the default model; in general x1..xn, yhat1..yhatm"
+                   if r["outputs_follow_the_model"] else ", ".join(r["outputs"]))
+        print(f"  inputs {', '.join(r['inputs'])}; outputs {outputs}; scenarios "
               f"{', '.join(r['scenarios'])}; source: {r['source']}")
         for name, summary in r["presets"].items():
             print(f"  --preset {name:<10} {summary}")
         if r["evaluation"]:
             print(f"  kfpga evaluate {r['name']}: its source document's evaluation")
     return 0
+
+
+#: The examples ending ``kfpga filters --help``.
+EXAMPLES = (
+    'kfpga filters',
+    'kfpga filters --json',
+)

@@ -83,3 +83,10 @@ def _print(rows):
         op = " [multiplier operand]" if r["multiplier_operand"] else ""
         print(f"{r['point']:<6} {r['format']:<7} {r['bits']:>4} {r['covers']:>12} {amax:>13} {r['rounding']:<10} "
               f"{r['overflow']:<9} {r['description']}{op}")
+
+
+#: The examples ending ``kfpga formats --help``.
+EXAMPLES = (
+    'kfpga formats --config tracker.toml',
+    'kfpga formats --filter roll --toml > roll.toml   # a config to edit',
+)

@@ -216,3 +216,10 @@ def _lint(out, top=None):
         print("iverilog -g2001: parses")
     else:
         print("iverilog not installed: Verilog-2001 parse check skipped")
+
+
+#: The examples ending ``kfpga generate --help``.
+EXAMPLES = (
+    "kfpga generate --config tracker.toml --out build/tracker       # the board's Quartus project",
+    'kfpga generate --config tracker.toml --core-only --prefix my_kf --out build/my_kf',
+)

@@ -43,3 +43,10 @@ def run(args):
     missing = sum(1 for line in text.splitlines() if line.endswith(",3.3-V LVTTL,choose a free user I/O pin"))
     common.info(f"wrote {args.write}" + (f"; {missing} port bit(s) still need a pin of your board" if missing else ""))
     return 0
+
+
+#: The examples ending ``kfpga pins --help``.
+EXAMPLES = (
+    'kfpga pins',
+    'kfpga pins --channels 16 --write my_pins.csv',
+)

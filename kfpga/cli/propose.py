@@ -157,3 +157,10 @@ def _print(config, args, variants, described, rows, result, out):
         print(f"  note: {note}")
     print(f"  {result.evaluations} candidates in {result.seconds:.1f} s" + (f"; wrote {out}" if out else
                                                                             "; --out FILE writes it as a config"))
+
+
+#: The examples ending ``kfpga propose --help``.
+EXAMPLES = (
+    'kfpga propose --config tracker.toml --out tracker-proposed.toml',
+    'kfpga propose --filter alpha-beta --objective bits --json',
+)

@@ -139,3 +139,10 @@ def _print(args, config, results, goals, met, note):
           f"  goals MISSED: {', '.join(f'{k} {figures[k]} > {goals[k]}' for k in missed)}")
     if note:
         print(f"  note: {note}")
+
+
+#: The examples ending ``kfpga resources --help``.
+EXAMPLES = (
+    'kfpga resources --config tracker.toml',
+    'kfpga resources --filter 53h --channels 6 --json',
+)

@@ -207,3 +207,10 @@ def _print(args, config, pre, summary):
     print(f"  wall {summary['wall_s']:.1f} s (+ build {summary['build_s']:.1f} s), {summary['samples_per_s']:.0f} samples/s")
     for w in summary["waves"]:
         print(f"  waveforms: {w}")
+
+
+#: The examples ending ``kfpga simulate --help``.
+EXAMPLES = (
+    'kfpga simulate --config tracker.toml --samples 1000 --seed 1',
+    'kfpga simulate --variant full --simulator icarus --samples 200',
+)

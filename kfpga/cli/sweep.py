@@ -85,3 +85,10 @@ def _print(title, rows, narrowest, budget, plot):
           + (f"narrowest width from which every wider one is within {pct} of float (better or worse): {narrowest} bits"
              if narrowest else f"no width in the range is within {pct} of float from there up"))
     print(f"plot: {plot}")
+
+
+#: The examples ending ``kfpga sweep --help``.
+EXAMPLES = (
+    "kfpga sweep --bits 8:20 --plot build/sweep.png          # RMSE against the state's fraction bits",
+    'kfpga sweep --config tracker.toml --budget 1 --json',
+)

@@ -144,3 +144,10 @@ def _run_board(args):
     return _report(args, result, head, [f"  files: {', '.join(info['files'])}",
                                         f"  ModelSim-Altera:  cd {out} && vsim -c -do run_modelsim.do",
                                         f"  Icarus:           {out}/run_icarus.sh"])
+
+
+#: The examples ending ``kfpga testbench --help``.
+EXAMPLES = (
+    'kfpga testbench --config tracker.toml --out build/tb --run-icarus',
+    'kfpga testbench --config tracker.toml --core-only --out build/core_tb',
+)

@@ -21,7 +21,7 @@ WORST_PATH_GOAL_NS = round(1000.0 / (1.25 * SYSTEM_MHZ), 2)
 
 #: ADC clock periods of one free-running conversion and its reads: one channel 23 (20 to convert,
 #: the EOC wait, two read states), all six 38 (six reads of two states); at 5 MHz a sample of one
-#: channel every 230 system cycles (SPEC §6, measured on the controller).
+#: channel every 230 system cycles (measured on the controller).
 CONVERSION_PERIODS = {1: 23, 6: 38}
 
 #: Sensors an analog multiplexer in front of one ADC channel may feed (the core's channel states).

@@ -286,7 +286,7 @@ def _add_arguments(parser):
                                                             "(default: 1e-5)")
     parser.add_argument("--noise", type=float, metavar="M_S", help="the speed log's noise, m/s (default: 0.1); the "
                                                                  "filter's r follows it (noise^2)")
-    parser.add_argument("--table", metavar="T:NS,...", help="the window table: |innovation| below each threshold "
+    parser.add_argument("--table", metavar="T:NS,...", help="the window table: an innovation below each threshold "
                                                             "(m/s) picks Ns, the last threshold inf (default: "
                                                             "0.1:30,0.3:12,inf:5)")
 
