@@ -165,8 +165,11 @@ def steady_goals(config, channels=1):
     """The constant-gain loop's goals: 400 logic cells for one channel, about 150 more per further
     channel state (three cells per state bit of x1 and v: 51 bits, for the registers, their read
     mux and write enable); two multipliers (none for a power-of-two gain), one more when T is not
-    a power of two; every path within the timing goal."""
-    return {"logic_cells": 400 + 150 * (channels - 1),
+    a power of two; every path within the timing goal. The start from the first measurements
+    (``init = "measurement"``) adds its multiplexers and subtraction (150 cells) and a 2-bit count
+    and a wider v per channel (20 more each)."""
+    started = start.measured(config.params)
+    return {"logic_cells": 400 + 150 * (channels - 1) + (150 + 20 * (channels - 1) if started else 0),
             "mul18": 2 + (0 if t_exponent(config.params.T) is not None else 1), "lut_levels": 16,
             "worst_path_ns": WORST_PATH_GOAL_NS}
 
