@@ -3,7 +3,7 @@
 # Ref: Texas Instruments SBAS219C (ADS8364), Timing and control; Explanation of clock, reset
 #      and EOC; Getting data (Figures 7, 9). Timing figures: kfpga/core/ads8364.py (TIMING).
 
-The model is simulator-agnostic: a wrapper (``sim/bench.py`` for cocotb, ``tests/adc_harness.py``
+The model is simulator-agnostic: a wrapper (``sim/bench.py`` for cocotb, ``tests/helpers/adc_harness.py``
 for the Amaranth unit tests) reports the pin levels with :meth:`ADS8364.pins` whenever they may
 have changed, with the time in ns, and applies the output events the model returns
 (``(time_ns, "eoc" | "data", value)``; ``data`` ``None`` means not driven).

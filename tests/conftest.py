@@ -1,14 +1,9 @@
 """Shared fixtures: every random source of a test is seeded from :func:`seed`, and the seed shown."""
 
 import os
-import sys
 import zlib
-from pathlib import Path
 
 import pytest
-
-# the Amaranth test helpers shared by the unit tests (tests/*_harness.py)
-sys.path.insert(0, str(Path(__file__).parent))
 
 SEED_KEY = pytest.StashKey[int]()
 

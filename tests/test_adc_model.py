@@ -16,7 +16,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from simulators import need
+from tests.helpers.simulators import need
 
 from kfpga.core.board import SYSTEM_PERIOD_NS
 from kfpga.core.tools import iverilog_path, verilator_env, verilator_root

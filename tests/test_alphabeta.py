@@ -13,7 +13,7 @@ import re
 import numpy as np
 import pytest
 from amaranth.sim import Simulator
-from simulators import need
+from tests.helpers.simulators import need
 
 from kfpga.core.config import ConfigError, FilterConfig
 from kfpga.core.fixedmodel import FixedModel

@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 import pytest
-from expected import FILTERS, REGISTERED
+from tests.helpers.expected import FILTERS, REGISTERED
 
 from kfpga.cli import main
 from kfpga.core.fixedmodel import FixedModel

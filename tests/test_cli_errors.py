@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from expected import REGISTERED
+from tests.helpers.expected import REGISTERED
 
 from kfpga.cli import main
 

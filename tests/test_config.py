@@ -4,7 +4,7 @@ import re
 
 import numpy as np
 import pytest
-from expected import REGISTERED
+from tests.helpers.expected import REGISTERED
 
 from kfpga.core.config import ConfigError, FilterConfig, analysed_ranges
 from kfpga.core.fixed import QFormat

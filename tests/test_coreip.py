@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from simulators import need
+from tests.helpers.simulators import need
 
 from kfpga.cli import main
 from kfpga.core.config import FilterConfig

@@ -10,7 +10,7 @@ import os
 
 import numpy as np
 import pytest
-from simulators import need
+from tests.helpers.simulators import need
 
 from kfpga.sim import system
 from kfpga.sim.runner import SIMULATORS, build, run

@@ -6,7 +6,7 @@ Every run also passes the model's timing checks (CLK, HOLD, RESET, address setup
 
 import numpy as np
 import pytest
-from adc_harness import ControllerTop, Harness, wait_outputs, wait_state
+from tests.helpers.adc_harness import ControllerTop, Harness, wait_outputs, wait_state
 
 from kfpga.hw.ads8364 import ADS8364Controller
 from kfpga.sim.sources import Source, scenario_source

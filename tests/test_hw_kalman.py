@@ -12,7 +12,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from simulators import need
+from tests.helpers.simulators import need
 
 from kfpga.core import registry
 from kfpga.core.ads8364 import CODE_MAX, CODE_MIN

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from simulators import core_is_bit_exact_on
+from tests.helpers.simulators import core_is_bit_exact_on
 
 from kfpga.cli import main
 from kfpga.model import lsfront as ls

@@ -4,7 +4,7 @@ simulate on both simulators, bit-exact)."""
 import json
 
 import pytest
-from simulators import need
+from tests.helpers.simulators import need
 
 from kfpga.cli import main
 from kfpga.core.config import FilterConfig

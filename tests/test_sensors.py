@@ -12,7 +12,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from simulators import need
+from tests.helpers.simulators import need
 
 from kfpga.cli import main
 from kfpga.core.board import MAX_SENSORS, Board

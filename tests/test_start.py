@@ -7,7 +7,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from simulators import need
+from tests.helpers.simulators import need
 
 from kfpga.cli import main
 from kfpga.core.config import FilterConfig

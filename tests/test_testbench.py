@@ -5,7 +5,7 @@ import re
 import subprocess
 
 import pytest
-from simulators import need
+from tests.helpers.simulators import need
 
 from kfpga.cli import main
 from kfpga.sim.testbench import TB_NAME, run_icarus

@@ -8,7 +8,7 @@ import json
 
 import numpy as np
 import pytest
-from simulators import need
+from tests.helpers.simulators import need
 
 from kfpga.cli import main
 from kfpga.core.ads8364 import CODE_MAX, CODE_MIN

@@ -10,7 +10,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from simulators import need
+from tests.helpers.simulators import need
 from test_contract import HW_CASES, samples_for
 
 from kfpga.core.config import FilterConfig
