@@ -16,12 +16,12 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from tests.helpers.simulators import need
 
 from kfpga.core.board import SYSTEM_PERIOD_NS
 from kfpga.core.tools import iverilog_path, verilator_env, verilator_root
 from kfpga.sim import hdl
 from kfpga.sim.ads8364 import ADS8364, TimingViolation
+from tests.helpers.simulators import need
 
 pytestmark = pytest.mark.cosim
 

@@ -13,7 +13,6 @@ import re
 import numpy as np
 import pytest
 from amaranth.sim import Simulator
-from tests.helpers.simulators import need
 
 from kfpga.core.config import ConfigError, FilterConfig
 from kfpga.core.fixedmodel import FixedModel
@@ -26,6 +25,7 @@ from kfpga.sim.amaranth_streams import run_stream, run_with_deadline
 from kfpga.sim.runner import SIMULATORS, build, run
 from kfpga.sim.scoreboard import Scoreboard
 from kfpga.sim.sources import stress_codes
+from tests.helpers.simulators import need
 
 CONFIG = FilterConfig(filter="alphabeta")  # each track from its first two plots (the default)
 FROM_STATE = FilterConfig(filter="alphabeta", params=ab.AlphaBetaParams(init="state"))

@@ -7,10 +7,10 @@ import sys
 
 import numpy as np
 import pytest
-from tests.helpers.expected import FILTERS, REGISTERED
 
 from kfpga.cli import main
 from kfpga.core.fixedmodel import FixedModel
+from tests.helpers.expected import FILTERS, REGISTERED
 
 COMPARE_KEYS = {"variant", "samples", "seed", "rmse_raw", "rmse_float", "rmse_fixed",
                 "max_abs_fixed_minus_float_lsb", "sqnr_db", "overflows"}

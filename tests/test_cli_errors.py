@@ -12,9 +12,9 @@ import sys
 from pathlib import Path
 
 import pytest
-from tests.helpers.expected import REGISTERED
 
 from kfpga.cli import main
+from tests.helpers.expected import REGISTERED
 
 GOOD_CSV = "y,truth\n" + "".join(f"{v},{v}.0\n" for v in (0, 10, 20, 30, 40, 50))
 LATIN1 = "y\n\xe9\n".encode("latin-1")

@@ -4,12 +4,12 @@ import re
 
 import numpy as np
 import pytest
-from tests.helpers.expected import REGISTERED
 
 from kfpga.core.config import ConfigError, FilterConfig, analysed_ranges
 from kfpga.core.fixed import QFormat
 from kfpga.model.kalman2 import POINTS
 from kfpga.model.reference import KalmanParams
+from tests.helpers.expected import REGISTERED
 
 KalmanConfig = FilterConfig  # the paper's filter is the default
 

@@ -11,12 +11,12 @@ import sys
 from pathlib import Path
 
 import pytest
-from tests.helpers.simulators import need
 
 from kfpga.cli import main
 from kfpga.core.config import FilterConfig
 from kfpga.core.tools import iverilog_path, verilator_env, verilator_root
 from kfpga.flows.coreip import write_core
+from tests.helpers.simulators import need
 
 ROOT = Path(__file__).parents[1]
 

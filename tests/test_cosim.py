@@ -10,10 +10,10 @@ import os
 
 import numpy as np
 import pytest
-from tests.helpers.simulators import need
 
 from kfpga.sim import system
 from kfpga.sim.runner import SIMULATORS, build, run
+from tests.helpers.simulators import need
 
 pytestmark = pytest.mark.cosim
 

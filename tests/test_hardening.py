@@ -9,11 +9,11 @@ import json
 
 import numpy as np
 import pytest
-from tests.helpers.simulators import need
 
 from kfpga.cli import main
 from kfpga.core.csvio import read_samples, read_series
 from kfpga.core.paths import TEMP_PREFIX, atomic_dir, atomic_file, check_output_dir
+from tests.helpers.simulators import need
 
 PLAIN = "y,truth\n-20,-19.5\n-15,-15.25\n3,2.5\n7,7.0\n"
 

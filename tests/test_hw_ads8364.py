@@ -6,10 +6,10 @@ Every run also passes the model's timing checks (CLK, HOLD, RESET, address setup
 
 import numpy as np
 import pytest
-from tests.helpers.adc_harness import ControllerTop, Harness, wait_outputs, wait_state
 
 from kfpga.hw.ads8364 import ADS8364Controller
 from kfpga.sim.sources import Source, scenario_source
+from tests.helpers.adc_harness import ControllerTop, Harness, wait_outputs, wait_state
 
 # The documented 16-bit control word layout (hw/ads8364.py), written out independently here.
 BITS = {"hold_a": 0, "hold_b": 1, "hold_c": 2, "addr": 3, "cs": 6, "rd": 7, "wr": 8, "byte": 9,

@@ -12,7 +12,6 @@ import dataclasses
 
 import numpy as np
 import pytest
-from tests.helpers.simulators import need
 
 from kfpga.core import registry
 from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
@@ -22,6 +21,7 @@ from kfpga.hw.kalman import FullCore, SteadyCore, default_stages
 from kfpga.model.kalman import SPEC
 from kfpga.sim.amaranth_streams import measure_timing, run_core
 from kfpga.sim.runner import SIMULATORS, build, run
+from tests.helpers.simulators import need
 
 PRESET_CASES = [("ca3", "steady"), ("ca3", "full"), ("va2", "steady")]
 

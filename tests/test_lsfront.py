@@ -6,11 +6,11 @@ import math
 
 import numpy as np
 import pytest
-from tests.helpers.simulators import core_is_bit_exact_on
 
 from kfpga.cli import main
 from kfpga.model import lsfront as ls
 from kfpga.sim.runner import SIMULATORS
+from tests.helpers.simulators import core_is_bit_exact_on
 
 
 @pytest.mark.parametrize("n", [3, 5, 12, 30])

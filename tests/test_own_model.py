@@ -7,7 +7,6 @@ import json
 
 import numpy as np
 import pytest
-from tests.helpers.simulators import need
 
 from kfpga.cli import main
 from kfpga.core.config import FilterConfig
@@ -17,6 +16,7 @@ from kfpga.model import scenarios
 from kfpga.model.kalman import StateSpaceParams
 from kfpga.model.reference import KalmanParams
 from kfpga.sim.runner import SIMULATORS, build, run
+from tests.helpers.simulators import need
 
 pytestmark = pytest.mark.xdist_group("own-model")
 

@@ -4,11 +4,11 @@ simulate on both simulators, bit-exact)."""
 import json
 
 import pytest
-from tests.helpers.simulators import need
 
 from kfpga.cli import main
 from kfpga.core.config import FilterConfig
 from kfpga.sim.runner import SIMULATORS
+from tests.helpers.simulators import need
 
 pytestmark = pytest.mark.xdist_group("propose")  # one worker computes the shared proposal
 

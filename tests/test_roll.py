@@ -6,11 +6,11 @@ import json
 
 import numpy as np
 import pytest
-from tests.helpers.simulators import core_is_bit_exact_on
 
 from kfpga.cli import main
 from kfpga.model import roll
 from kfpga.sim.runner import SIMULATORS
+from tests.helpers.simulators import core_is_bit_exact_on
 
 
 def test_table1_is_the_papers():

@@ -12,7 +12,6 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from tests.helpers.simulators import need
 
 from kfpga.cli import main
 from kfpga.core.board import MAX_SENSORS, Board
@@ -22,6 +21,7 @@ from kfpga.hw.top import port_widths
 from kfpga.sim import system
 from kfpga.sim.ads8364 import Read
 from kfpga.sim.sources import scenario_source, sensor_source
+from tests.helpers.simulators import need
 
 AB100 = """[filter]
 name = "alphabeta"

@@ -7,7 +7,6 @@ import dataclasses
 
 import numpy as np
 import pytest
-from tests.helpers.simulators import need
 
 from kfpga.cli import main
 from kfpga.core.config import FilterConfig
@@ -19,6 +18,7 @@ from kfpga.model.kalman import StateSpaceParams, start_plan
 from kfpga.model.reference import KalmanParams
 from kfpga.model.roll import RollParams
 from kfpga.sim.runner import SIMULATORS, build, run
+from tests.helpers.simulators import need
 
 pytestmark = pytest.mark.xdist_group("start")
 

@@ -5,10 +5,10 @@ import re
 import subprocess
 
 import pytest
-from tests.helpers.simulators import need
 
 from kfpga.cli import main
 from kfpga.sim.testbench import TB_NAME, run_icarus
+from tests.helpers.simulators import need
 
 pytestmark = pytest.mark.cosim
 

@@ -8,7 +8,6 @@ import json
 
 import numpy as np
 import pytest
-from tests.helpers.simulators import need
 
 from kfpga.cli import main
 from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
@@ -17,6 +16,7 @@ from kfpga.core.fixedmodel import FixedModel
 from kfpga.core.ops import CostOps, IntOps
 from kfpga.model import tukey53h as th
 from kfpga.sim.amaranth_streams import measure_timing, run_core
+from tests.helpers.simulators import need
 
 CONFIG = FilterConfig(filter="tukey53h")
 

@@ -25,7 +25,6 @@ import os
 
 import numpy as np
 import pytest
-from tests.helpers.simulators import need
 
 from kfpga.core import registry
 from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
@@ -37,6 +36,7 @@ from kfpga.core.tools import iverilog_parse, iverilog_path, verilator_lint
 from kfpga.hw.generate import write_block
 from kfpga.sim.amaranth_streams import measure_timing, run_core
 from kfpga.sim.runner import SIMULATORS, build, run
+from tests.helpers.simulators import need
 
 ROUNDINGS = [r.value for r in Rounding]
 #: Clock cycles a simulation's samples may take at the core's rate, and the fewest samples.

@@ -10,11 +10,11 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from tests.helpers.simulators import need
 from test_contract import HW_CASES, samples_for
 
 from kfpga.core.config import FilterConfig
 from kfpga.flows.coreip import write_core
+from tests.helpers.simulators import need
 
 
 def run_core_tb(folder, timeout_s=900):
