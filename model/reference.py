@@ -7,7 +7,7 @@ Three forms, which agree to rounding error (tests pin this):
 
 * :func:`kalman_matrix`: the five matrix equations of the paper (its eqs. 1-5).
 * :func:`kalman_decomposed`: the scalar decomposition of the paper's section 4.3.1 with its two
-  misprints corrected (``pl21`` and ``K2``, see README), vectorised along a batch axis.
+  misprints corrected (``pl21`` and ``K2``, see docs/filters/kalman2.md), vectorised along a batch axis.
 * :func:`steady_state`: the same filter with the constant gain ``K_inf`` of the discrete
   Riccati equation, i.e. an alpha-beta filter with ``alpha = K1``, ``beta = T*K2``.
 """

@@ -158,7 +158,7 @@ def test_the_fusesoc_core_parses_and_its_icarus_target_passes(tmp_path):
 
 
 def test_the_amaranth_example_runs():
-    """``examples/amaranth_core.py``, as the README shows it: the core inside an Amaranth design,
+    """``examples/amaranth_core.py``, as the manual shows it (docs/quartus-and-ip.md): the core inside an Amaranth design,
     every estimate the model's."""
     from kfpga.core.fixedmodel import FixedModel
 

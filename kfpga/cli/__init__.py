@@ -80,7 +80,7 @@ def _words(p):
 
 
 def synopsis(width=110):
-    """The command synopsis of the README, written from the parser (so the two cannot drift); a
+    """The command synopsis of the manual (docs/cli.md), written from the parser (so the two cannot drift); a
     command with sub-commands (``evaluate``) gets a line per sub-command (aliases not repeated)."""
     lines = []
 

