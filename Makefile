@@ -49,19 +49,19 @@ formal: $(STAMP)
 	$(BIN)/python -m kfpga.verify.formal
 
 # mutation testing of every block: Yosys mutants, killed by the benches or the properties, then
-# mutants of the Python source of hw/, killed by the tests that run their line (see README)
+# mutants of the Python source of hw/, killed by the tests that run their line (see docs/verification.md)
 mutate: $(STAMP)
 	$(BIN)/python -m kfpga.verify.mutate; netlist=$$?; \
 	$(BIN)/python -m kfpga.verify.srcmutate; source=$$?; \
 	exit $$(( netlist || source ))
 
-# the source-level mutants alone (about an hour on 2 cores, see README)
+# the source-level mutants alone (about an hour on 2 cores, see docs/verification.md)
 mutate-source: $(STAMP)
 	$(BIN)/python -m kfpga.verify.srcmutate
 
 # long regressions: 10^6 whole-design estimates per variant on Verilator, in one-channel and in
 # six-channel mode, and 10^5 per variant on Icarus, each with its own seed (printed); 0 mismatches
-# or a non-zero exit (about 30 minutes on 2 cores, see README)
+# or a non-zero exit (about 30 minutes on 2 cores, see docs/verification.md)
 REGRESS_VERILATOR ?= 1000000
 REGRESS_ICARUS ?= 100000
 regress: $(STAMP)
