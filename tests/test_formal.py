@@ -84,3 +84,48 @@ def test_the_command_refuses_bad_options(capsys):
         formal.main(["--only", "no such block"])
     assert exc.value.code == 2
     assert "no job matches --only 'no such block'" in capsys.readouterr().err
+
+
+class _Buffer:
+    """A one-word stream buffer, right (``i.ready = ~o.valid | o.ready``) or with the slip the
+    source mutants found in a core (``~o.valid & o.ready``: it waits for ``o.ready`` even when empty)."""
+
+    def __new__(cls, slip):
+        from amaranth import Module
+        from amaranth.lib import data, stream, wiring
+        from amaranth.lib.wiring import In, Out
+
+        word = data.StructLayout({"x": 8})
+
+        class Buffer(wiring.Component):
+            i: In(stream.Signature(word))
+            o: Out(stream.Signature(word))
+
+            def elaborate(self, platform):
+                m = Module()
+                free = (~self.o.valid & self.o.ready) if slip else (~self.o.valid | self.o.ready)
+                m.d.comb += self.i.ready.eq(free)
+                with m.If(self.o.valid & self.o.ready):
+                    m.d.sync += self.o.valid.eq(0)
+                with m.If(self.i.valid & self.i.ready):
+                    m.d.sync += [self.o.valid.eq(1), self.o.payload.eq(self.i.payload)]
+                return m
+
+        return Buffer()
+
+
+@pytest.mark.parametrize("slip", [False, True])
+def test_free_when_idle_catches_a_core_that_waits_for_ready(warmed, tmp_path, slip):
+    """The stream property "free when idle" (every core gets it in make formal) holds for a
+    buffer that keeps the contract and fails for one that waits for o.ready when empty, the
+    deadlock of a receiver that raises ready only after it sees valid."""
+    from kfpga.verify.properties import StreamProps
+
+    base = job("kalman2 steady core", "free when idle")
+    planted = dataclasses.replace(base, make=lambda only: StreamProps(_Buffer(slip), 1, 3, only=only), depth=8,
+                                  cover_depth=8)
+    row = formal.run_job(planted, tmp_path)
+    if slip:
+        assert not row["ok"] and row["result"] == "FAILED (counterexample)", row
+    else:
+        assert row["ok"], row

@@ -96,7 +96,8 @@ def _cores():
             latency = core.latency + getattr(core, "startup_cycles", 0)
             drain += getattr(core, "startup_cycles", 0)
             label = f"{spec.name} {variant} core" + (" (handshake twin)" if twin else "")
-            out.append((label, latency, drain, capacity, make, getattr(core, "formal_depth", None)))
+            out.append((label, latency, drain, capacity, make, getattr(core, "formal_depth", None),
+                        getattr(core, "startup_cycles", 0)))
     return out
 
 
@@ -137,13 +138,13 @@ def jobs():
             else:
                 # one whole conversion after the reset sequence, and the next HOLD
                 out.append(Job(label, prop, make, "bmc", conversion + 16, conversion + 16, syn=True))
-    for label, latency, drain, capacity, make_core, limit in _cores():
+    for label, latency, drain, capacity, make_core, limit, startup in _cores():
         for prop in p.StreamProps.PROPERTIES:
             # the output contract needs a result made and held: one update; the others a drain too
             depth = latency + 8 if prop == "output contract" else drain + latency + 4
             depth = depth if limit is None else min(depth, limit)  # a core may state the solver's reach
-            out.append(Job(label, prop, lambda only, c=make_core, k=capacity, d=drain: p.StreamProps(c(), k, d, only=only),
-                           "bmc", depth, depth, syn="twin" in label))
+            out.append(Job(label, prop, lambda only, c=make_core, k=capacity, d=drain, s=startup:
+                           p.StreamProps(c(), k, d, only=only, startup=s), "bmc", depth, depth, syn="twin" in label))
     return out
 
 

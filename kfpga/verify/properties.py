@@ -365,13 +365,16 @@ class StreamProps(Harness):
         "input only when free": "i.ready only while the core can take a sample: no more in flight than it holds",
         "one output per input": "outputs never outnumber inputs, and all come out once o.ready has been high long "
                                 "enough",
+        "free when idle": "with nothing in flight and no output waiting, i.ready is high whatever o.ready is: a "
+                          "receiver that raises ready only after it sees valid is never deadlocked",
     }
 
-    def __init__(self, core, capacity, drain, only=None):
+    def __init__(self, core, capacity, drain, only=None, startup=0):
         super().__init__(only)
         self.dut = core
         self.capacity = capacity  # samples the core can hold at once
         self.drain = drain  # cycles with o.ready high (and no input) after which nothing is left
+        self.startup = startup  # cycles after reset before the core takes its first sample
 
     def elaborate(self, platform):
         m = Module()
@@ -405,4 +408,10 @@ class StreamProps(Harness):
             with m.If(~rst & (calm >= self.drain)):
                 m.d.comb += Assert(inflight == 0, "every input has come out")
             m.d.comb += Cover(~rst & give & (inflight == 1) & self.past(m, inflight == 1, "one_was"))
+        if self.want("free when idle"):
+            # cycles since reset, saturating past the core's start-up (its reset state written)
+            up = self.counter(m, "since_reset", (self.startup + 2).bit_length() + 1, clear=rst, count=1)
+            with m.If(~rst & (up > self.startup) & (inflight == 0) & ~c.o.valid):
+                m.d.comb += Assert(c.i.ready, "free when nothing is in flight, whatever o.ready")
+            m.d.comb += Cover(~rst & (up > self.startup) & (inflight == 0) & ~ready & c.i.ready)
         return m
