@@ -78,3 +78,21 @@ def test_every_rtl_file_of_hw_has_three_sites_at_least():
         if rel in NOT_RTL:
             continue
         assert len(mutants_of(rel, 3, random.Random(1), root=root)) == 3, rel
+
+
+def test_a_design_that_no_longer_elaborates_kills_the_mutant(tmp_path):
+    """A constant table is run at import, by no test's context: its mutant is judged on the designs
+    the tests build, and one that no longer elaborates is killed, not a survivor."""
+    from kfpga.verify.srcmutate import broken, equivalence
+
+    original, mutant = tmp_path / "original", tmp_path / "mutant"
+    original.mkdir()
+    mutant.mkdir()
+    for name in ("a", "b"):
+        (original / f"{name}.il").write_text(f"module {name}\n")
+    (mutant / "a.il").write_text("module a\n")
+    (mutant / "b.il").write_text("elaboration failed: IndexError: tuple index out of range")
+    assert broken(original, mutant) == "b"
+    (mutant / "b.il").write_text("module b\n")
+    assert broken(original, mutant) is None
+    assert equivalence(original, mutant, tmp_path / "eq") == (True, "no design the tests build changes")

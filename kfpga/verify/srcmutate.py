@@ -23,7 +23,9 @@ run on it (``pytest -x``): a failure kills it. A mutant no test runs, or that su
 checked for equivalence: every design the tests build (each registered core on each of its
 architectures with 1 and 3 channels, 10 where it keeps states in memory, the divider, the square
 root, the many-track core and the board's top) is elaborated from the original and from the
-mutated source, and Yosys compares each pair that differs (``equiv_make``, ``equiv_simple``,
+mutated source (a design that no longer elaborates kills the mutant: every test that builds it
+would fail; a line run at import, such as a constant table, has no test context of its own), and
+Yosys compares each pair that differs (``equiv_make``, ``equiv_simple``,
 ``equiv_induct``, ``equiv_status -assert``). When no design differs, or every pair that differs
 is proven equal, the mutant is *equivalent* for those designs; otherwise it *survived*. The
 score is killed / (mutants - equivalent), per file.
@@ -356,16 +358,26 @@ def _equal(gold, gate, folder):
     return code == 0, "" if code == 0 else log.strip().splitlines()[-1][-200:] if log.strip() else "yosys failed"
 
 
+def broken(original, mutant_dir):
+    """The first design the tests build that the mutant no longer elaborates (or ``None``): a
+    line run at import (a constant table, module-level code) is run by no test's context, but a
+    design that cannot be built fails every test that builds it."""
+    for p in sorted(original.glob("*.il")):
+        gate = mutant_dir / p.name
+        if not gate.exists() or gate.read_text().startswith("elaboration failed"):
+            return p.name[:-3]
+    return None
+
+
 def equivalence(original, mutant_dir, folder):
-    """``(equivalent, detail)`` of the designs elaborated in ``original`` and ``mutant_dir``."""
+    """``(equivalent, detail)`` of the designs elaborated in ``original`` and ``mutant_dir`` (every
+    one of which elaborates: see :func:`broken`)."""
     differ = [p.name for p in sorted(original.glob("*.il"))
               if not (mutant_dir / p.name).exists() or (mutant_dir / p.name).read_text() != p.read_text()]
     if not differ:
         return True, "no design the tests build changes"
     for name in differ:
         gate = mutant_dir / name
-        if not gate.exists() or gate.read_text().startswith("elaboration failed"):
-            return False, f"{name[:-3]}: the mutant does not elaborate"
         proven, why = _equal(original / name, gate, folder / name[:-3])
         if not proven:
             return False, f"{name[:-3]} differs ({why})"
@@ -397,6 +409,10 @@ def run_mutant(mutant, tree, tests, original, progress):
         designs, why = elaborate(tree, folder / "mutant")
         if designs is None:
             mutant.result, mutant.by = "killed", f"elaboration fails: {why.strip().splitlines()[-1] if why else ''}"
+            return mutant
+        name = broken(original, folder / "mutant")
+        if name is not None:
+            mutant.result, mutant.by = "killed", f"{name} no longer elaborates (every test that builds it fails)"
             return mutant
         same, detail = equivalence(original, folder / "mutant", folder)
         mutant.result, mutant.by = ("equivalent" if same else "survived"), detail
