@@ -315,4 +315,5 @@ SPEC = FilterSpec(
     error_std=_error_std,
     mutation=_mutation,
     period=lambda params: (params.T, True),
+    evaluation="kfpga.model.evaluations.kalman2:EVALUATION",
 )
