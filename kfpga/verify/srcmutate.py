@@ -21,8 +21,8 @@ which gives, for each line of ``hw/``, the tests that ran it. The mutant is writ
 the source tree (``build/mutate/source/tree``; the working tree is never touched) and those tests
 run on it (``pytest -x``): a failure kills it. A mutant no test runs, or that survives them, is
 checked for equivalence: every design the tests build (each registered core on each of its
-architectures with 1 and 3 channels, 10 where it keeps states in memory, the divider, the square
-root, the many-track core and the board's top) is elaborated from the original and from the
+architectures with 1 and 3 channels, 10 where it keeps states in memory, a pipelined loop at every
+stage count it takes, the divider, the square root, the many-track core and the board's top) is elaborated from the original and from the
 mutated source (a design that no longer elaborates kills the mutant: every test that builds it
 would fail; a line run at import, such as a constant table, has no test context of its own), and
 Yosys compares each pair that differs (``equiv_make``, ``equiv_simple``,
@@ -317,12 +317,17 @@ for spec in registry.specs():
                 def make(spec=spec, config=config, variant=variant, arch=arch, ch=ch):
                     return spec.make_core(config, variant, channels=ch, architecture=arch)
                 designs[f"{spec.name}-{variant}-{arch}-{ch}"] = make
+            if arch == "parallel":  # a pipelined loop at every register-stage count it takes
+                for stages in range(1, 9):
+                    def staged(spec=spec, config=config, variant=variant, stages=stages):
+                        return spec.make_core(config, variant, architecture="parallel", stages=stages)
+                    designs[f"{spec.name}-{variant}-stages{stages}"] = staged
 done = {}
 for name, make in designs.items():
     try:
         dut = make()
-    except ValueError:
-        continue  # more channels than this core holds
+    except (ValueError, TypeError):
+        continue  # more channels than this core holds, or a stage count (or stages at all) it does not take
     try:
         text = rtlil.convert(dut, name="top")
     except Exception as exc:  # the mutant breaks elaboration: a design that differs
