@@ -21,12 +21,12 @@ which gives, for each line of ``hw/``, the tests that ran it. The mutant is writ
 the source tree (``build/mutate/source/tree``; the working tree is never touched) and those tests
 run on it (``pytest -x``): a failure kills it. A mutant no test runs, or that survives them, is
 checked for equivalence: every design the tests build (each registered core on each of its
-architectures with 1 and 3 channels, 10 where it keeps states in memory, a pipelined loop at every
-stage count it takes, the divider, the square root, the many-track core and the board's top) is elaborated from the original and from the
-mutated source (a design that no longer elaborates kills the mutant: every test that builds it
-would fail; a line run at import, such as a constant table, has no test context of its own), and
-Yosys compares each pair that differs (``equiv_make``, ``equiv_simple``,
-``equiv_induct``, ``equiv_status -assert``). When no design differs, or every pair that differs
+architectures with 1 and 3 channels, 10 where it keeps states in memory, a pipelined loop at
+every stage count it takes, the divider, the square root, the many-track core and the board's
+top) is elaborated from the original and from the mutated source (a design that no longer
+elaborates kills the mutant: every test that builds it would fail; a line run at import, such as
+a constant table, has no test context of its own), and Yosys compares each pair that differs
+(``equiv_make``, ``equiv_simple``, ``equiv_induct``, ``equiv_status -assert``). When no design differs, or every pair that differs
 is proven equal, the mutant is *equivalent* for those designs; otherwise it *survived*. The
 score is killed / (mutants - equivalent), per file.
 
