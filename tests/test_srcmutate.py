@@ -96,3 +96,13 @@ def test_a_design_that_no_longer_elaborates_kills_the_mutant(tmp_path):
     (mutant / "b.il").write_text("module b\n")
     assert broken(original, mutant) is None
     assert equivalence(original, mutant, tmp_path / "eq") == (True, "no design the tests build changes")
+
+
+def test_a_line_run_at_import_gets_the_tests_of_its_file():
+    from kfpga.verify.srcmutate import Mutant, tests_of
+
+    covered = {("hw/a.py", 10): {"t1"}, ("hw/a.py", 12): {"t2"}, ("hw/b.py", 3): {"t3"}}
+    inside = Mutant("hw/a.py", 10, "+/-", "a + b", "a - b", (10, 4), (10, 9))
+    table = Mutant("hw/a.py", 2, "const+-1", "3", "4", (2, 8), (2, 9))
+    assert tests_of(covered, inside) == {"t1"}
+    assert tests_of(covered, table) == {"t1", "t2"}  # no test runs line 2: its file's tests

@@ -15,7 +15,8 @@ that write files and estimate and the core factory (:data:`NOT_RTL`: ``generate.
 ``resources.py``, ``timing.py``, ``ip.py``), never a docstring, a message or an argument check (an ``if`` that only raises).
 Sites are drawn with a seeded generator, ``--mutants`` per file.
 
-Each mutant runs the tests that execute its line: a first pass runs the fast tests of the
+Each mutant runs the tests that execute its line (a line no test's context runs, module-level
+code such as a constant table, runs the tests of its whole file): a first pass runs the fast tests of the
 hardware (:data:`POOL`, the Amaranth-simulator ones) under ``coverage`` with a context per test,
 which gives, for each line of ``hw/``, the tests that ran it. The mutant is written into a copy of
 the source tree (``build/mutate/source/tree``; the working tree is never touched) and those tests
@@ -392,6 +393,16 @@ def equivalence(original, mutant_dir, folder):
 # -- the run ------------------------------------------------------------------------------------------
 
 
+def tests_of(covered, mutant):
+    """The tests that run the mutant's lines; for a line no test's context runs (module-level code
+    such as a constant table, run at import) every test that runs any line of its file."""
+    lines = range(mutant.start[0], mutant.end[0] + 1)
+    tests = set().union(*[covered.get((mutant.file, n), set()) for n in lines])
+    if tests:
+        return tests
+    return set().union(*[t for (f, _), t in covered.items() if f == mutant.file])
+
+
 def run_mutant(mutant, tree, tests, original, progress):
     path = tree / mutant.file
     source = path.read_text()
@@ -490,7 +501,7 @@ def main(argv=None):
         raise SystemExit(f"the original source does not elaborate: {why}")
     done = []
     for k, mutant in enumerate(chosen, 1):
-        tests = set().union(*[covered.get((mutant.file, n), set()) for n in range(mutant.start[0], mutant.end[0] + 1)])
+        tests = tests_of(covered, mutant)
         run_mutant(mutant, tree, tests, ROOT / "original", say)
         done.append(mutant)
         say(f"[{k}/{len(chosen)}] {mutant.file}:{mutant.line} {mutant.operator} `{mutant.before}` -> `{mutant.after}`: "
