@@ -16,7 +16,7 @@ from kfpga.core.fixedmodel import FixedModel
 from kfpga.core.ops import CostOps, IntOps
 from kfpga.model import tukey53h as th
 from kfpga.sim.amaranth_streams import measure_timing, run_core
-from tests.helpers.simulators import need
+from tests.helpers.simulators import core_is_bit_exact_on, need
 
 CONFIG = FilterConfig(filter="tukey53h")
 
@@ -390,15 +390,8 @@ def test_angle_core_bit_exact(channels, seed):
 @pytest.mark.parametrize("simulator", ["verilator", "icarus"])
 def test_angle_core_bit_exact_in_cocotb(simulator, seed):
     """The generated Verilog with a period, two channels, on both simulators: every integer the model's."""
-    from kfpga.sim.runner import build, run
-
-    need(simulator)
     h = _heading(seed, 400)
-    result = run(build(simulator, "core", config=ANGLE, variant="online", channels=2), "test_core",
-                 testcase="core_bit_exact",
-                 params={"variant": "online", "seed": seed, "codes": [int(c) for c in h], "channels": 2,
-                         "p_idle": 0.2, "p_ready": 0.7, "config_toml": ANGLE.to_toml()}, tag="53h-angle")
-    assert result["ok"] and result["mismatches"] == 0 and result["samples"] == 400, result.get("first_mismatches")
+    core_is_bit_exact_on(simulator, ANGLE, "online", h, seed, "53h-angle", channels=2)
 
 
 # -- navigation data wider than an ADC code ------------------------------------------------------------
@@ -469,12 +462,5 @@ def test_wide_core_bit_exact(channels, seed):
 @pytest.mark.parametrize("simulator", ["verilator", "icarus"])
 def test_wide_core_bit_exact_in_cocotb(simulator, seed):
     """The generated Verilog with 32-bit inputs, a latitude in 1e-7 deg, on both simulators."""
-    from kfpga.sim.runner import build, run
-
-    need(simulator)
     lat, _ = _latitude(seed, 400)
-    result = run(build(simulator, "core", config=LATITUDE, variant="online", channels=2), "test_core",
-                 testcase="core_bit_exact",
-                 params={"variant": "online", "seed": seed, "codes": [int(c) for c in lat], "channels": 2,
-                         "p_idle": 0.2, "p_ready": 0.7, "config_toml": LATITUDE.to_toml()}, tag="53h-wide")
-    assert result["ok"] and result["mismatches"] == 0 and result["samples"] == 400, result.get("first_mismatches")
+    core_is_bit_exact_on(simulator, LATITUDE, "online", lat, seed, "53h-wide", channels=2)

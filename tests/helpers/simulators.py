@@ -16,16 +16,16 @@ def need(simulator):
         pytest.skip(why)
 
 
-def core_is_bit_exact_on(simulator, config, variant, codes, seed, tag):
-    """The core bench (``sim/test_core.py``, ``core_bit_exact``) on ``codes`` (one channel), with
-    random valid/ready: every output is the model's, one per sample."""
+def core_is_bit_exact_on(simulator, config, variant, codes, seed, tag, channels=1):
+    """The core bench (``sim/test_core.py``, ``core_bit_exact``) on ``codes`` (over ``channels``
+    channels), with random valid/ready: every output is the model's, one per sample."""
     from kfpga.sim.runner import build, run
 
     need(simulator)
-    result = run(build(simulator, "core", config=config, variant=variant, channels=1), "test_core",
+    result = run(build(simulator, "core", config=config, variant=variant, channels=channels), "test_core",
                  testcase="core_bit_exact",
                  params={"variant": variant, "seed": seed, "codes": [int(c) for c in codes], "samples": len(codes),
-                         "channels": 1, "p_idle": 0.2, "p_ready": 0.7, "config_toml": config.to_toml()}, tag=tag)
+                         "channels": channels, "p_idle": 0.2, "p_ready": 0.7, "config_toml": config.to_toml()}, tag=tag)
     assert result["mismatches"] == 0 and result["ok"], result.get("first_mismatches")
     assert result["samples"] == len(codes)
     return result
