@@ -71,6 +71,17 @@ def test_the_draw_is_seeded(block):
     assert one == two and len(one) == 4
 
 
+def test_a_files_draw_depends_on_the_seed_and_its_path_only(block):
+    """So ``--only`` batches draw the mutants the whole run draws for their files."""
+    other = block.parent / "other.py"
+    other.write_text(SOURCE)
+    alone = mutants_of(block.name, 3, 5, root=block.parent)
+    mutants_of(other.name, 3, 5, root=block.parent)
+    again = mutants_of(block.name, 3, 5, root=block.parent)
+    assert [(m.line, m.after) for m in alone] == [(m.line, m.after) for m in again]
+    assert {(m.line, m.after) for m in alone} != {(m.line, m.after) for m in mutants_of(block.name, 3, 6, root=block.parent)}
+
+
 def test_every_rtl_file_of_hw_has_three_sites_at_least():
     root = Path(__file__).parents[1]
     for path in sorted((root / "hw").glob("*.py")):

@@ -179,8 +179,12 @@ def _replace(source, node, text):
 
 
 def mutants_of(path, count, rng, root=Path(".")):
-    """``count`` mutants of ``path`` (fewer if it has fewer sites), drawn with ``rng``; each is
-    valid Python and changes the file."""
+    """``count`` mutants of ``path`` (fewer if it has fewer sites), drawn with ``rng`` (a
+    :class:`random.Random`, or a seed: the draw of a file then depends on the seed and the file's
+    path only, so a run over some files draws what a run over all draws for them); each is valid
+    Python and changes the file."""
+    if not isinstance(rng, random.Random):
+        rng = random.Random(f"{rng}:{path}")
     source = (root / path).read_text()
     if not source.isascii():
         raise ValueError(f"{path}: the mutation offsets assume ASCII source")
@@ -463,7 +467,7 @@ def main(argv=None):
         description="Source-level mutation of hw/: seeded mutants of the RTL-building Python (operators, constants, "
                     "Mux operands, dropped statements, inverted conditions), each run against the tests that execute "
                     "its line; survivors checked for equivalence with Yosys. Writes build/mutate/source/report.json "
-                    "and prints the score per file (goal: >= 95 %%).",
+                    "and prints the score per file (goal: >= 95 percent).",
         epilog="example: python -m kfpga.verify.srcmutate --mutants 3 --seed 1 --only sqrt")
     parser.add_argument("--mutants", type=int, default=3, help="mutants per file (default 3)")
     parser.add_argument("--seed", type=int, default=1, help="seed of the sites' draw (default 1)")
@@ -492,8 +496,7 @@ def main(argv=None):
     t0 = time.perf_counter()
     ROOT.mkdir(parents=True, exist_ok=True)
     tree = copy_tree(here, ROOT / "tree")
-    rng = random.Random(args.seed)
-    chosen = [m for f in files for m in mutants_of(f, args.mutants, rng, root=tree)]
+    chosen = [m for f in files for m in mutants_of(f, args.mutants, args.seed, root=tree)]
     covered = line_tests(tree, say, args.tests)
     say("elaborating every design from the original source ...")
     original, why = elaborate(tree, ROOT / "original")
