@@ -220,176 +220,213 @@ class FullCore(Core):
         return self.cycles_per_update
 
     def elaborate(self, platform):
-        m = Module()
-        f, n = self.config.formats, self.n
-        regs = self._states()
-        names = list(regs)
-        channel = Signal.like(self.i.payload.channel)
-        obs = self.config.inputs[0]
-        sample = Signal(signed(CODE_FORMAT.width))
-        work = {nm: Signal(signed(f[self.state_points[nm]].width), name=f"{nm}_w") for nm in names}
+        b = _FullBuild(self, Module())
+        b.predict()
+        b.divide()
+        b.multiply()
+        b.write_back()
+        b.schedule()
+        return b.m
+
+
+class _FullBuild:
+    """The parts of a :class:`FullCore`, one method per step of its schedule; each keeps as
+    attributes the signals the later ones use."""
+
+    def __init__(self, core, m):
+        self.core, self.m = core, m
+        self.f, self.n = core.config.formats, core.n
+        self.regs = core._states()
+        self.names = list(self.regs)
+        self.channel = Signal.like(core.i.payload.channel)
+        self.obs = core.config.inputs[0]
+        self.sample = Signal(signed(CODE_FORMAT.width))
+        self.work = {nm: Signal(signed(self.f[core.state_points[nm]].width), name=f"{nm}_w") for nm in self.names}
         # the overflow flags of each step, registered as they are (ORed only when the word is written)
-        step_flags = []
+        self.step_flags = []
 
-        def keep_flags(ops, tag):
-            live = live_flags([flag for _, flag in ops.flags])
-            if not live:
-                return []  # no write of the step can overflow: no register
-            reg = Signal(len(live), name=f"{tag}_flags")
-            step_flags.append(reg)
-            return [reg.eq(Cat(*live))]
+    def keep_flags(self, ops, tag):
+        live = live_flags([flag for _, flag in ops.flags])
+        if not live:
+            return []  # no write of the step can overflow: no register
+        reg = Signal(len(live), name=f"{tag}_flags")
+        self.step_flags.append(reg)
+        return [reg.eq(Cat(*live))]
 
-        def fx(signal, point):
-            return Fx(signal.as_signed(), f[point].frac_bits, None, f[point], point)
+    def fx(self, signal, point):
+        return Fx(signal.as_signed(), self.f[point].frac_bits, None, self.f[point], point)
 
-        x = [fx(work[f"x{i + 1}"], f"x{i + 1}") for i in range(n)]
+    def p_read(self, i, j):
+        name = f"p{min(i, j) + 1}{max(i, j) + 1}"
+        return self.fx(self.work[name], name)
 
-        def p_read(i, j):
-            name = f"p{min(i, j) + 1}{max(i, j) + 1}"
-            return fx(work[name], name)
+    def predict(self):
+        """T1: exact F x and F P; T2: xl, and (F P) F^T + G Q G^T exact; T3: Pl, yh, e."""
+        m, core, n = self.m, self.core, self.n
+        x = [self.fx(self.work[f"x{i + 1}"], f"x{i + 1}") for i in range(n)]
+        self.t1 = t1 = core.arith(m, prefix="t1_")
+        self.k = k = t1.constants(core.constants)
+        self.xl_sum = [t1.hold(v, f"xlsum{i}") for i, v in enumerate(eq.predict_sums(t1, k, x))]
+        self.fp = [[t1.hold(v, f"fp{i}{j}") for j, v in enumerate(row)]
+                   for i, row in enumerate(eq.covariance_fp(t1, k, self.p_read))]
+        self.t2 = t2 = core.arith(m, prefix="t2_")
+        self.xl = [t2.hold(t2.rq(v, f"xl{i + 1}"), f"xl{i}") for i, (v, _) in enumerate(self.xl_sum)]
+        self.pl_sum = {ij: t2.hold(v, f"plsum{ij[0]}{ij[1]}")
+                       for ij, v in eq.covariance_sums(t2, k, [[h for h, _ in row] for row in self.fp]).items()}
+        self.t3 = t3 = core.arith(m, prefix="t3_")
+        self.pl = {ij: t3.hold(t3.rq(v, f"pl{ij[0] + 1}{ij[1] + 1}"), f"pl{ij[0]}{ij[1]}")
+                   for ij, (v, _) in self.pl_sum.items()}
+        self.xl_r = [h for h, _ in self.xl]
+        yh = eq.observe(t3, k, self.xl_r)
+        e = eq.innovations(t3, k, {self.obs: t3.input(self.sample, CODE_FORMAT, self.obs)}, yh)
+        self.yh_r, self.yh_assign = t3.hold(yh[0], "yh")
+        self.e_r, self.e_assign = t3.hold(e[0], "e")
 
-        # -- T1: exact F x and F P -------------------------------------------------------------
-        t1 = self.arith(m, prefix="t1_")
-        k = t1.constants(self.constants)
-        xl_sum = [t1.hold(v, f"xlsum{i}") for i, v in enumerate(eq.predict_sums(t1, k, x))]
-        fp = [[t1.hold(v, f"fp{i}{j}") for j, v in enumerate(row)] for i, row in enumerate(eq.covariance_fp(t1, k, p_read))]
-        # -- T2: xl, and (F P) F^T + G Q G^T exact --------------------------------------------------
-        t2 = self.arith(m, prefix="t2_")
-        xl = [t2.hold(t2.rq(v, f"xl{i + 1}"), f"xl{i}") for i, (v, _) in enumerate(xl_sum)]
-        pl_sum = {ij: t2.hold(v, f"plsum{ij[0]}{ij[1]}")
-                  for ij, v in eq.covariance_sums(t2, k, [[h for h, _ in row] for row in fp]).items()}
-        # -- T3: Pl, yh, e ---------------------------------------------------------------------------
-        t3 = self.arith(m, prefix="t3_")
-        pl = {ij: t3.hold(t3.rq(v, f"pl{ij[0] + 1}{ij[1] + 1}"), f"pl{ij[0]}{ij[1]}") for ij, (v, _) in pl_sum.items()}
-        xl_r = [h for h, _ in xl]
-        yh = eq.observe(t3, k, xl_r)
-        e = eq.innovations(t3, k, {obs: t3.input(sample, CODE_FORMAT, obs)}, yh)
-        yh_r, yh_assign = t3.hold(yh[0], "yh")
-        e_r, e_assign = t3.hold(e[0], "e")
-        # -- T4: S and the dividends -------------------------------------------------------------------
-        t4 = self.arith(m, prefix="t4_")
-        pl_r = {ij: h for ij, (h, _) in pl.items()}
-        hp = eq.observed_rows(t4, k, pl_r)
-        s = eq.innovation_variance(t4, k, hp)
-        shifts = [divider_shift(hp[0][i].frac, s.frac, f[f"k{i + 1}"].frac_bits) for i in range(n)]
-        widths = [len(hp[0][i].raw) + shifts[i] for i in range(n)]
-        div = Divider(dividend_bits=max(widths), divisor_bits=f["s"].width, quotient_bits=max(self.qbits))
+    def divide(self):
+        """T4: S and the dividends; DIV: one gain after another on one divider."""
+        m, core, f, n = self.m, self.core, self.f, self.n
+        self.t4 = t4 = core.arith(m, prefix="t4_")
+        self.pl_r = {ij: h for ij, (h, _) in self.pl.items()}
+        self.hp = hp = eq.observed_rows(t4, self.k, self.pl_r)
+        self.s = s = eq.innovation_variance(t4, self.k, hp)
+        self.shifts = [divider_shift(hp[0][i].frac, s.frac, f[f"k{i + 1}"].frac_bits) for i in range(n)]
+        widths = [len(hp[0][i].raw) + self.shifts[i] for i in range(n)]
+        self.div = div = Divider(dividend_bits=max(widths), divisor_bits=f["s"].width, quotient_bits=max(core.qbits))
         m.submodules.div = div
-        nums = [Signal(max(widths), name=f"num{i}") for i in range(n)]
-        den = Signal(f["s"].width, name="den")
+        self.nums = [Signal(max(widths), name=f"num{i}") for i in range(n)]
+        self.den = Signal(f["s"].width, name="den")
+        self.index = index = Signal(range(max(n, len(core.products)) + 1), name="index")
+        self.gains = [Signal(signed(f[f"k{i + 1}"].width), name=f"K{i}") for i in range(n)]
+        q = div.o.payload.quotient
+        limit = Signal(max(core.qbits) + 1, name="limit")
+        # operands chosen by mux trees, not case blocks (see storage.select)
+        m.d.comb += limit.eq(select([Const((1 << b) - 1, len(limit)) for b in core.qbits], index))
+        sel_num = Signal(max(widths))
+        m.d.comb += [sel_num.eq(select(self.nums, index)), div.i.payload.dividend.eq(sel_num),
+                     div.i.payload.divisor.eq(self.den), div.o.ready.eq(1)]
+        self.hp_sign = Signal(n)
+        self.saturate = (div.o.payload.overflow | (q > limit))
+        self.quotient = Mux(self.saturate, limit, q)
+
+    def multiply(self):
+        """MUL: one product per cycle on one multiplier."""
+        m, core, f, n, hp = self.m, self.core, self.f, self.n, self.hp
+        operands_a = [Fx(g, f[f"k{i + 1}"].frac_bits) for i, g in enumerate(self.gains)]
+        self.hp_r = [Signal(signed(len(hp[0][j].raw)), name=f"hp{j}") for j in range(n)]
+        hp_fx = [Fx(self.hp_r[j], hp[0][j].frac) for j in range(n)]
+        pairs = [(operands_a[p[1]], self.e_r if p[0] == "e" else hp_fx[p[2]]) for p in core.products]
+        width_a = max(len(a.raw) for a, _ in pairs)
+        width_b = max(len(b.raw) for _, b in pairs)
+        # the operands are registered: the mux in front of the multiplier gets a cycle of its own
+        self.sel_a, self.sel_b = Signal(signed(width_a)), Signal(signed(width_b))
+        m.d.comb += [self.sel_a.eq(select([a.raw.as_signed() for a, _ in pairs], self.index)),
+                     self.sel_b.eq(select([b.raw.as_signed() for _, b in pairs], self.index))]
+        self.op_a, self.op_b = Signal(signed(width_a), name="op_a"), Signal(signed(width_b), name="op_b")
+        self.product = Signal(signed(width_a + width_b), name="product")
+        m.d.comb += self.product.eq(self.op_a * self.op_b)
+        self.prod_regs = [Signal(signed(len(a.raw) + len(b.raw)), name=f"prod{idx}") for idx, (a, b) in enumerate(pairs)]
+        self.products = {p: Fx(self.prod_regs[idx], pairs[idx][0].frac + pairs[idx][1].frac)
+                         for idx, p in enumerate(core.products)}
+
+    def write_back(self):
+        """WB: the corrections from the registered products; the flags of every step."""
+        m, core = self.m, self.core
+        wb = core.arith(m, prefix="wb_")
+        self.state = eq.update_corrections(wb, self.k, self.xl_r, self.pl_r, self.products)
+        self.wb_live = live_flags([flag for _, flag in wb.flags])
+        self.wb_bits = Signal(max(len(self.wb_live), 1), name="wb_flags")
+        self.done = {nm: Signal(signed(self.f[core.state_points[nm]].width), name=f"{nm}_done")
+                     for nm in (f"x{i + 1}" for i in range(self.n))}
+        self.div_flags = Signal(name="div_flags")
+        self.kept = {tag: self.keep_flags(ops, tag)
+                     for tag, ops in (("t1", self.t1), ("t2", self.t2), ("t3", self.t3), ("t4", self.t4))}
+        self.out_flags = ([r.any() for r in self.step_flags] + [self.div_flags] +
+                          ([self.wb_bits.any()] if self.wb_live else []))
+        core.flag_outputs(m, self.out_flags)
+
+    def schedule(self):
+        m, core = self.m, self.core
+        with m.If(core.o.valid & core.o.ready):
+            m.d.sync += core.o.valid.eq(0)
+        with m.FSM(name="schedule") as fsm:
+            self.predict_states()
+            self.divide_states()
+            self.finish_states()
+        # plain assignments (Verilog `assign`), not case-statement outputs: no simulator can
+        # leave them undefined at time zero while the state has not changed yet
+        m.d.comb += [core.i.ready.eq(fsm.ongoing("IDLE")), self.div.i.valid.eq(fsm.ongoing("GO"))]
+
+    def predict_states(self):
+        m, core, kept = self.m, self.core, self.kept
+        with m.State("IDLE"):
+            with m.If(core.i.valid):
+                m.d.sync += [self.channel.eq(core.i.payload.channel), self.sample.eq(getattr(core.i.payload, self.obs))]
+                m.d.sync += [self.work[nm].eq(select(self.regs[nm], core.i.payload.channel)) for nm in self.names]
+                m.next = "T1"
+        with m.State("T1"):
+            m.d.sync += [a for _, a in self.xl_sum] + [a for row in self.fp for _, a in row]
+            m.d.sync += kept["t1"]
+            m.next = "T2"
+        with m.State("T2"):
+            m.d.sync += [a for _, a in self.xl] + [a for _, a in self.pl_sum.values()]
+            m.d.sync += kept["t2"]
+            m.next = "T3"
+        with m.State("T3"):
+            m.d.sync += [a for _, a in self.pl.values()] + [self.yh_assign, self.e_assign]
+            m.d.sync += kept["t3"]
+            m.next = "T4"
+
+    def divide_states(self):
+        m, n, hp, index = self.m, self.n, self.hp, self.index
 
         def magnitude(v, shift):
             return Mux(v < 0, -v, v).as_unsigned().shift_left(shift)
 
-        # -- DIV: one gain after another ---------------------------------------------------------------
-        index = Signal(range(max(n, len(self.products)) + 1), name="index")
-        gains = [Signal(signed(f[f"k{i + 1}"].width), name=f"K{i}") for i in range(n)]
-        q = div.o.payload.quotient
-        limit = Signal(max(self.qbits) + 1, name="limit")
-        # operands chosen by mux trees, not case blocks (see storage.select)
-        m.d.comb += limit.eq(select([Const((1 << b) - 1, len(limit)) for b in self.qbits], index))
-        sel_num = Signal(max(widths))
-        m.d.comb += [sel_num.eq(select(nums, index)), div.i.payload.dividend.eq(sel_num),
-                     div.i.payload.divisor.eq(den), div.o.ready.eq(1)]
-        hp_sign = Signal(n)
-        saturate = (div.o.payload.overflow | (q > limit))
-        quotient = Mux(saturate, limit, q)
-
-        # -- MUL: one product per cycle on one multiplier -------------------------------------------------
-        operands_a = [Fx(g, f[f"k{i + 1}"].frac_bits) for i, g in enumerate(gains)]
-        hp_r = [Signal(signed(len(hp[0][j].raw)), name=f"hp{j}") for j in range(n)]
-        hp_fx = [Fx(hp_r[j], hp[0][j].frac) for j in range(n)]
-        pairs = [(operands_a[p[1]], e_r if p[0] == "e" else hp_fx[p[2]]) for p in self.products]
-        width_a = max(len(a.raw) for a, _ in pairs)
-        width_b = max(len(b.raw) for _, b in pairs)
-        # the operands are registered: the mux in front of the multiplier gets a cycle of its own
-        sel_a, sel_b = Signal(signed(width_a)), Signal(signed(width_b))
-        m.d.comb += [sel_a.eq(select([a.raw.as_signed() for a, _ in pairs], index)),
-                     sel_b.eq(select([b.raw.as_signed() for _, b in pairs], index))]
-        op_a, op_b = Signal(signed(width_a), name="op_a"), Signal(signed(width_b), name="op_b")
-        product = Signal(signed(width_a + width_b), name="product")
-        m.d.comb += product.eq(op_a * op_b)
-        prod_regs = [Signal(signed(len(a.raw) + len(b.raw)), name=f"prod{idx}") for idx, (a, b) in enumerate(pairs)]
-        products = {p: Fx(prod_regs[idx], pairs[idx][0].frac + pairs[idx][1].frac) for idx, p in enumerate(self.products)}
-
-        # -- WB: the corrections from the registered products ------------------------------------------------
-        wb = self.arith(m, prefix="wb_")
-        state = eq.update_corrections(wb, k, xl_r, pl_r, products)
-        wb_live = live_flags([flag for _, flag in wb.flags])
-        wb_bits = Signal(max(len(wb_live), 1), name="wb_flags")
-        done = {nm: Signal(signed(f[self.state_points[nm]].width), name=f"{nm}_done") for nm in (f"x{i + 1}" for i in range(n))}
-
-        div_flags = Signal(name="div_flags")
-        kept = {tag: keep_flags(ops, tag) for tag, ops in (("t1", t1), ("t2", t2), ("t3", t3), ("t4", t4))}
-        out_flags = [r.any() for r in step_flags] + [div_flags] + ([wb_bits.any()] if wb_live else [])
-        self.flag_outputs(m, out_flags)
-        with m.If(self.o.valid & self.o.ready):
-            m.d.sync += self.o.valid.eq(0)
-
-        with m.FSM(name="schedule") as fsm:
-            with m.State("IDLE"):
-                with m.If(self.i.valid):
-                    m.d.sync += [channel.eq(self.i.payload.channel), sample.eq(getattr(self.i.payload, obs))]
-                    m.d.sync += [work[nm].eq(select(regs[nm], self.i.payload.channel)) for nm in names]
-                    m.next = "T1"
-            with m.State("T1"):
-                m.d.sync += [a for _, a in xl_sum] + [a for row in fp for _, a in row]
-                m.d.sync += kept["t1"]
-                m.next = "T2"
-            with m.State("T2"):
-                m.d.sync += [a for _, a in xl] + [a for _, a in pl_sum.values()]
-                m.d.sync += kept["t2"]
-                m.next = "T3"
-            with m.State("T3"):
-                m.d.sync += [a for _, a in pl.values()] + [yh_assign, e_assign]
-                m.d.sync += kept["t3"]
-                m.next = "T4"
-            with m.State("T4"):
-                m.d.sync += [nums[i].eq(magnitude(hp[0][i].raw, shifts[i])) for i in range(n)]
-                m.d.sync += [hp_r[j].eq(hp[0][j].raw) for j in range(n)]
-                m.d.sync += [hp_sign.eq(Cat(*(hp[0][i].raw < 0 for i in range(n)))), index.eq(0)]
-                m.d.sync += [den.eq(Mux(s.raw > 0, s.raw.as_unsigned(), 0)), *kept["t4"],
-                             div_flags.eq(0)]
-                m.next = "GO"  # S <= 0 becomes a zero divisor (the quotient saturates)
-            with m.State("GO"):
-                m.next = "DIV"
-            with m.State("DIV"):
-                with m.If(div.o.valid):
-                    with m.Switch(index):
-                        for i in range(n):
-                            with m.Case(i):
-                                m.d.sync += gains[i].eq(Mux(hp_sign[i], -quotient, quotient))
-                    m.d.sync += [div_flags.eq(div_flags | saturate), index.eq(index + 1)]
-                    with m.If(index == n - 1):
-                        m.d.sync += index.eq(0)
-                        m.next = "MUL"
-                    with m.Else():
-                        m.next = "GO"
-            with m.State("MUL"):  # cycle c loads the operands of product c and stores product c - 1
-                m.d.sync += [op_a.eq(sel_a), op_b.eq(sel_b), index.eq(index + 1)]
+        with m.State("T4"):
+            m.d.sync += [self.nums[i].eq(magnitude(hp[0][i].raw, self.shifts[i])) for i in range(n)]
+            m.d.sync += [self.hp_r[j].eq(hp[0][j].raw) for j in range(n)]
+            m.d.sync += [self.hp_sign.eq(Cat(*(hp[0][i].raw < 0 for i in range(n)))), index.eq(0)]
+            m.d.sync += [self.den.eq(Mux(self.s.raw > 0, self.s.raw.as_unsigned(), 0)), *self.kept["t4"],
+                         self.div_flags.eq(0)]
+            m.next = "GO"  # S <= 0 becomes a zero divisor (the quotient saturates)
+        with m.State("GO"):
+            m.next = "DIV"
+        with m.State("DIV"):
+            with m.If(self.div.o.valid):
                 with m.Switch(index):
-                    for idx, reg in enumerate(prod_regs, start=1):
-                        with m.Case(idx):
-                            m.d.sync += reg.eq(product)
-                with m.If(index == len(self.products)):
-                    m.next = "WB"
-            with m.State("WB"):
-                m.d.sync += [at(regs[nm], channel).eq(state[nm].raw) for nm in names]
-                m.d.sync += [done[nm].eq(state[nm].raw) for nm in done]
-                if wb_live:
-                    m.d.sync += wb_bits.eq(Cat(*wb_live))
-                m.next = "OUT"
-            with m.State("OUT"):
-                with m.If(~self.o.valid | self.o.ready):
-                    m.d.sync += self.o.valid.eq(1)
-                    outputs = {nm: Fx(done[nm], 0) for nm in done}
-                    outputs["yhat1"] = yh_r
-                    write_estimate(m, self, channel, outputs, out_flags)
-                    m.next = "IDLE"
-        # plain assignments (Verilog `assign`), not case-statement outputs: no simulator can
-        # leave them undefined at time zero while the state has not changed yet
-        m.d.comb += [self.i.ready.eq(fsm.ongoing("IDLE")), div.i.valid.eq(fsm.ongoing("GO"))]
-        return m
+                    for i in range(n):
+                        with m.Case(i):
+                            m.d.sync += self.gains[i].eq(Mux(self.hp_sign[i], -self.quotient, self.quotient))
+                m.d.sync += [self.div_flags.eq(self.div_flags | self.saturate), index.eq(index + 1)]
+                with m.If(index == n - 1):
+                    m.d.sync += index.eq(0)
+                    m.next = "MUL"
+                with m.Else():
+                    m.next = "GO"
+
+    def finish_states(self):
+        m, core, index = self.m, self.core, self.index
+        with m.State("MUL"):  # cycle c loads the operands of product c and stores product c - 1
+            m.d.sync += [self.op_a.eq(self.sel_a), self.op_b.eq(self.sel_b), index.eq(index + 1)]
+            with m.Switch(index):
+                for idx, reg in enumerate(self.prod_regs, start=1):
+                    with m.Case(idx):
+                        m.d.sync += reg.eq(self.product)
+            with m.If(index == len(core.products)):
+                m.next = "WB"
+        with m.State("WB"):
+            m.d.sync += [at(self.regs[nm], self.channel).eq(self.state[nm].raw) for nm in self.names]
+            m.d.sync += [self.done[nm].eq(self.state[nm].raw) for nm in self.done]
+            if self.wb_live:
+                m.d.sync += self.wb_bits.eq(Cat(*self.wb_live))
+            m.next = "OUT"
+        with m.State("OUT"):
+            with m.If(~core.o.valid | core.o.ready):
+                m.d.sync += core.o.valid.eq(1)
+                outputs = {nm: Fx(self.done[nm], 0) for nm in self.done}
+                outputs["yhat1"] = self.yh_r
+                write_estimate(m, core, self.channel, outputs, self.out_flags)
+                m.next = "IDLE"
 
 
 def make_core(config, variant, *, channels=1, stages=None):

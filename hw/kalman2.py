@@ -84,153 +84,181 @@ class FullCore(Core):
         return self.cycles_per_update
 
     def elaborate(self, platform):
-        m = Module()
-        f = self.config.formats
-        names = ("x1", "v", "p11", "p12", "p21", "p22")
-        regs = self._states(names)
-        m.submodules.div1 = div1 = Divider(**self._divider_args)
-        m.submodules.div2 = div2 = Divider(**self._divider_args)
-        points = dict(self.config.spec.variants["full"].state_for(self.config.params))
+        b = _FullBuild(self, Module())
+        b.time_update()
+        b.correction()
+        b.rate()
+        b.schedule()
+        return b.m
 
+
+class _FullBuild:
+    """The parts of a :class:`FullCore`, one method per part of its schedule; each keeps as
+    attributes the signals the later ones use."""
+
+    names = ("x1", "v", "p11", "p12", "p21", "p22")
+
+    def __init__(self, core, m):
+        self.core, self.m = core, m
+        self.f = f = core.config.formats
+        self.regs = core._states(self.names)
+        m.submodules.div1 = self.div1 = Divider(**core._divider_args)
+        m.submodules.div2 = self.div2 = Divider(**core._divider_args)
+        self.points = points = dict(core.config.spec.variants["full"].state_for(core.config.params))
         # working registers of the channel being updated
-        channel = Signal.like(self.i.payload.channel)
-        sample = Signal(signed(CODE_FORMAT.width))
-        work = {n: Signal(signed(f[points[n]].width), name=f"{n}_w") for n in names}
-        flags = Signal()  # OR of the overflow flags of this update so far
+        self.channel = Signal.like(core.i.payload.channel)
+        self.sample = Signal(signed(CODE_FORMAT.width))
+        self.work = {n: Signal(signed(f[points[n]].width), name=f"{n}_w") for n in self.names}
+        self.flags = Signal()  # OR of the overflow flags of this update so far
 
-        # -- TU1: the time update, from the working registers ----------------------------------
-        tu1 = self.arith(m, prefix="tu1_")
-        k = tu1.constants(self.constants)
-        x = {n: tu1.input(work[n], points[n], n) for n in names}
+    def time_update(self):
+        """TU1: the time update, from the working registers; TU2: S, the innovation, the dividends."""
+        m, core, f = self.m, self.core, self.f
+        self.tu1 = tu1 = core.arith(m, prefix="tu1_")
+        self.k = k = tu1.constants(core.constants)
+        self.x = x = {n: tu1.input(self.work[n], self.points[n], n) for n in self.names}
         xl1 = cvloop.predict(tu1, x["x1"], x["v"])                                        # xl1 = x1 + v
         pl = eq.covariance_predict(tu1, k, x["p11"], x["p12"], x["p21"], x["p22"])   # P' = Phi P Phi^T + Q'
-        held1 = [tu1.hold(v, n) for v, n in zip((xl1, *pl), ("xl1", "pl11", "pl12", "pl21", "pl22"), strict=True)]
-        xl1_r, pl11_r, pl12_r, pl21_r, pl22_r = (h for h, _ in held1)
-
-        # -- TU2: S, the innovation, the dividends ----------------------------------------------
-        tu2 = self.arith(m, prefix="tu2_")
-        s = eq.innovation_variance(tu2, k, pl11_r)                                    # S = pl11 + R
-        e = cvloop.innovation(tu2, tu2.input(sample, CODE_FORMAT, "y"), xl1_r)            # e = y - xl1
-        e_r, e_assign = tu2.hold(e, "e")
-
-        def dividend(pl_value):  # |pl| << shift: the divider works on magnitudes
-            magnitude = Mux(pl_value < 0, -pl_value, pl_value).as_unsigned()
-            return magnitude.shift_left(self.div_shift)[:self.dividend_bits]
-
-        num1, num2 = Signal(self.dividend_bits, name="num1"), Signal(self.dividend_bits, name="num2")
-        den = Signal(f["s"].width, name="den")
+        self.held1 = [tu1.hold(v, n) for v, n in zip((xl1, *pl), ("xl1", "pl11", "pl12", "pl21", "pl22"), strict=True)]
+        self.xl1_r, self.pl11_r, self.pl12_r, self.pl21_r, self.pl22_r = (h for h, _ in self.held1)
+        self.tu2 = tu2 = core.arith(m, prefix="tu2_")
+        self.s = eq.innovation_variance(tu2, k, self.pl11_r)                           # S = pl11 + R
+        e = cvloop.innovation(tu2, tu2.input(self.sample, CODE_FORMAT, "y"), self.xl1_r)  # e = y - xl1
+        self.e_r, self.e_assign = tu2.hold(e, "e")
+        self.num1 = Signal(core.dividend_bits, name="num1")
+        self.num2 = Signal(core.dividend_bits, name="num2")
+        self.den = Signal(f["s"].width, name="den")
+        div1, div2 = self.div1, self.div2
         m.d.comb += [
-            div1.i.payload.dividend.eq(num1), div1.i.payload.divisor.eq(den),
-            div2.i.payload.dividend.eq(num2), div2.i.payload.divisor.eq(den),
+            div1.i.payload.dividend.eq(self.num1), div1.i.payload.divisor.eq(self.den),
+            div2.i.payload.dividend.eq(self.num2), div2.i.payload.divisor.eq(self.den),
             div1.o.ready.eq(1), div2.o.ready.eq(1),
         ]
 
-        # -- gains: truncation toward zero, the sign back from the numerator ----------------------
-        k1 = Signal(signed(f["gain"].width))
-        k2 = Signal(signed(f["gain"].width))
+    def dividend(self, pl_value):
+        """|pl| << shift: the divider works on magnitudes."""
+        magnitude = Mux(pl_value < 0, -pl_value, pl_value).as_unsigned()
+        return magnitude.shift_left(self.core.div_shift)[:self.core.dividend_bits]
 
-        def signed_quotient(result, numerator):
-            return Mux(numerator < 0, -result.quotient, result.quotient)
-
-        # -- MUL: the products (registered); WB: the sums, from the registered products ----------
-        mul = self.arith(m, prefix="mul_")
+    def correction(self):
+        """The gains (truncation toward zero, the sign back from the numerator); MUL: the
+        products (registered); WB: the sums, from the registered products."""
+        m, core, f = self.m, self.core, self.f
+        self.k1 = k1 = Signal(signed(f["gain"].width))
+        self.k2 = k2 = Signal(signed(f["gain"].width))
+        mul = core.arith(m, prefix="mul_")
         g1, g2 = mul.input(k1, "gain", "K1"), mul.input(k2, "gain", "K2")
-        k1e, k2e, pk = eq.full_products(mul, g1, g2, e_r, pl11_r, pl12_r)
-        products = [mul.hold(v, n) for v, n in zip((k1e, k2e, *pk), ("k1e", "k2e", "k1p11", "k1p12", "k2p11", "k2p12"),
-                                                   strict=True)]
-        k1e_r, k2e_r, *pk_r = (p for p, _ in products)
-        wb = self.arith(m, prefix="wb_")
-        x1_n = cvloop.correct(wb, xl1_r, k1e_r, "x1")                                     # x1 = xl1 + K1 e
-        v_n = cvloop.correct(wb, x["v"], k2e_r, "v")                                      # v = v + K2 e
-        p_n = eq.covariance_correct(wb, (pl11_r, pl12_r, pl21_r, pl22_r), pk_r)       # P = P' - K C P'
-        next_state = dict(zip(names, (x1_n, v_n, *p_n), strict=True))
+        k1e, k2e, pk = eq.full_products(mul, g1, g2, self.e_r, self.pl11_r, self.pl12_r)
+        self.products = [mul.hold(v, n) for v, n in zip((k1e, k2e, *pk), ("k1e", "k2e", "k1p11", "k1p12", "k2p11", "k2p12"),
+                                                        strict=True)]
+        k1e_r, k2e_r, *pk_r = (p for p, _ in self.products)
+        wb = core.arith(m, prefix="wb_")
+        self.x1_n = cvloop.correct(wb, self.xl1_r, k1e_r, "x1")                          # x1 = xl1 + K1 e
+        self.v_n = cvloop.correct(wb, self.x["v"], k2e_r, "v")                           # v = v + K2 e
+        p_n = eq.covariance_correct(wb, (self.pl11_r, self.pl12_r, self.pl21_r, self.pl22_r), pk_r)  # P = P' - K C P'
+        self.next_state = dict(zip(self.names, (self.x1_n, self.v_n, *p_n), strict=True))
         # the flags of WB are registered one by one and ORed in the next cycle: an OR tree
         # after the saturations would lengthen WB's path by two LUT levels
-        wb_live = live_flags([flag for _, flag in wb.flags])
-        wb_bits = Signal(len(wb_live), name="wb_flags") if wb_live else None
-        wb_any = wb_bits.any() if wb_live else NO_OVERFLOW
+        self.wb_live = live_flags([flag for _, flag in wb.flags])
+        self.wb_bits = Signal(len(self.wb_live), name="wb_flags") if self.wb_live else None
+        self.wb_any = self.wb_bits.any() if self.wb_live else NO_OVERFLOW
 
-        # -- x2 = v / T from the new v: free when T = 2**k, else three steps ---------------------
-        v_done = Signal(signed(f["v"].width), name="v_done")
-        x1_done = Signal(signed(f["x1"].width), name="x1_done")
-        v_done_fx = Fx(v_done, f["v"].frac_bits, None, f["v"], "v")
-        rate_ops = [self.arith(m, prefix=f"x{n}_") for n in range(1, 4)]
-        if self.rate_steps:
-            operand, op_assign = rate_ops[0].hold(cvloop.rate_operand(rate_ops[0], k, v_done_fx), "vt")
-            product, pr_assign = rate_ops[1].hold(cvloop.rate_product(rate_ops[1], k, operand), "vt_inv_t")
-            x2_n = cvloop.rate_write(rate_ops[2], k, product)
-            rate_flags = [rate_ops[0].overflow(), NO_OVERFLOW, rate_ops[2].overflow()]
-            out_flags = [flags, rate_flags[2]]
+    def rate(self):
+        """x2 = v / T from the new v: free when T = 2**k, else three steps."""
+        m, core, f = self.m, self.core, self.f
+        self.v_done = Signal(signed(f["v"].width), name="v_done")
+        self.x1_done = Signal(signed(f["x1"].width), name="x1_done")
+        v_done_fx = Fx(self.v_done, f["v"].frac_bits, None, f["v"], "v")
+        rate_ops = [core.arith(m, prefix=f"x{n}_") for n in range(1, 4)]
+        if core.rate_steps:
+            operand, self.op_assign = rate_ops[0].hold(cvloop.rate_operand(rate_ops[0], self.k, v_done_fx), "vt")
+            product, self.pr_assign = rate_ops[1].hold(cvloop.rate_product(rate_ops[1], self.k, operand), "vt_inv_t")
+            self.x2_n = cvloop.rate_write(rate_ops[2], self.k, product)
+            self.rate_flags = [rate_ops[0].overflow(), NO_OVERFLOW, rate_ops[2].overflow()]
+            self.out_flags = [self.flags, self.rate_flags[2]]
         else:
-            x2_n = cvloop.rate(rate_ops[0], k, v_done_fx)
-            rate_flags = [rate_ops[0].overflow()]
-            out_flags = [flags, wb_any, rate_flags[0]]
+            self.x2_n = cvloop.rate(rate_ops[0], self.k, v_done_fx)
+            self.rate_flags = [rate_ops[0].overflow()]
+            self.out_flags = [self.flags, self.wb_any, self.rate_flags[0]]
 
-        with m.If(self.o.valid & self.o.ready):
-            m.d.sync += self.o.valid.eq(0)
+    def emit(self, x2):
+        m, core = self.m, self.core
+        with m.If(~core.o.valid | core.o.ready):
+            m.d.sync += core.o.valid.eq(1)
+            write_estimate(m, core, self.channel, {"x1": Fx(self.x1_done, 0), "x2": x2, "yhat": self.xl1_r},
+                           self.out_flags)
+            m.next = "IDLE"
 
-        self.flag_outputs(m, out_flags)
-
-        def emit(x2):
-            with m.If(~self.o.valid | self.o.ready):
-                m.d.sync += self.o.valid.eq(1)
-                write_estimate(m, self, channel, {"x1": Fx(x1_done, 0), "x2": x2, "yhat": xl1_r}, out_flags)
-                m.next = "IDLE"
-
+    def schedule(self):
+        m, core = self.m, self.core
+        with m.If(core.o.valid & core.o.ready):
+            m.d.sync += core.o.valid.eq(0)
+        core.flag_outputs(m, self.out_flags)
         with m.FSM(name="schedule") as fsm:
-            with m.State("IDLE"):
-                with m.If(self.i.valid):
-                    m.d.sync += [channel.eq(self.i.payload.channel), sample.eq(self.i.payload.y)]
-                    m.d.sync += [work[n].eq(select(regs[n], self.i.payload.channel)) for n in names]
-                    m.next = "TU1"
-            with m.State("TU1"):
-                m.d.sync += [assign for _, assign in held1]
-                m.d.sync += flags.eq(tu1.overflow())  # the constant 0 when no TU1 write can overflow
-                m.next = "TU2"
-            with m.State("TU2"):
-                m.d.sync += [e_assign, flags.eq(any_flag([flags, tu2.overflow()])),
-                             num1.eq(dividend(pl11_r.raw)), num2.eq(dividend(pl21_r.raw)),
-                             den.eq(Mux(s.raw > 0, s.raw.as_unsigned(), 0))]  # S <= 0: a zero divisor (saturates)
-                m.next = "GO"
-            with m.State("GO"):
-                m.next = "DIV"
-            with m.State("DIV"):
-                with m.If(div1.o.valid):  # both dividers finish in the same cycle
-                    m.d.sync += [
-                        k1.eq(signed_quotient(div1.o.payload, pl11_r.raw)),
-                        k2.eq(signed_quotient(div2.o.payload, pl21_r.raw)),
-                        flags.eq(flags | div1.o.payload.overflow | div2.o.payload.overflow),
-                    ]
-                    m.next = "MUL"
-            with m.State("MUL"):
-                m.d.sync += [assign for _, assign in products]
-                m.next = "WB"
-            with m.State("WB"):
-                m.d.sync += [at(regs[n], channel).eq(next_state[n].raw) for n in names]
-                m.d.sync += [v_done.eq(v_n.raw), x1_done.eq(x1_n.raw)]
-                if wb_live:
-                    m.d.sync += wb_bits.eq(Cat(*wb_live))
-                m.next = "X1"
-            with m.State("X1"):
-                if self.rate_steps:
-                    m.d.sync += [op_assign, flags.eq(any_flag([flags, wb_any, rate_flags[0]]))]
-                    m.next = "X2"
-                else:
-                    emit(x2_n)
-            if self.rate_steps:
-                with m.State("X2"):
-                    m.d.sync += pr_assign
-                    m.next = "X3"
-                with m.State("X3"):
-                    emit(x2_n)
+            self.update_states()
+            self.write_states()
         # plain assignments (Verilog `assign`), not case-statement outputs: no simulator can
         # leave them undefined at time zero while the state has not changed yet
         m.d.comb += [
-            self.i.ready.eq(fsm.ongoing("IDLE")),
-            div1.i.valid.eq(fsm.ongoing("GO")),
-            div2.i.valid.eq(fsm.ongoing("GO")),
+            core.i.ready.eq(fsm.ongoing("IDLE")),
+            self.div1.i.valid.eq(fsm.ongoing("GO")),
+            self.div2.i.valid.eq(fsm.ongoing("GO")),
         ]
-        return m
+
+    def update_states(self):
+        m, core, flags = self.m, self.core, self.flags
+        with m.State("IDLE"):
+            with m.If(core.i.valid):
+                m.d.sync += [self.channel.eq(core.i.payload.channel), self.sample.eq(core.i.payload.y)]
+                m.d.sync += [self.work[n].eq(select(self.regs[n], core.i.payload.channel)) for n in self.names]
+                m.next = "TU1"
+        with m.State("TU1"):
+            m.d.sync += [assign for _, assign in self.held1]
+            m.d.sync += flags.eq(self.tu1.overflow())  # the constant 0 when no TU1 write can overflow
+            m.next = "TU2"
+        with m.State("TU2"):
+            m.d.sync += [self.e_assign, flags.eq(any_flag([flags, self.tu2.overflow()])),
+                         self.num1.eq(self.dividend(self.pl11_r.raw)), self.num2.eq(self.dividend(self.pl21_r.raw)),
+                         self.den.eq(Mux(self.s.raw > 0, self.s.raw.as_unsigned(), 0))]  # S <= 0: a zero divisor
+            m.next = "GO"
+        with m.State("GO"):
+            m.next = "DIV"
+        with m.State("DIV"):
+            with m.If(self.div1.o.valid):  # both dividers finish in the same cycle
+                m.d.sync += [
+                    self.k1.eq(_signed_quotient(self.div1.o.payload, self.pl11_r.raw)),
+                    self.k2.eq(_signed_quotient(self.div2.o.payload, self.pl21_r.raw)),
+                    flags.eq(flags | self.div1.o.payload.overflow | self.div2.o.payload.overflow),
+                ]
+                m.next = "MUL"
+        with m.State("MUL"):
+            m.d.sync += [assign for _, assign in self.products]
+            m.next = "WB"
+
+    def write_states(self):
+        m, core = self.m, self.core
+        with m.State("WB"):
+            m.d.sync += [at(self.regs[n], self.channel).eq(self.next_state[n].raw) for n in self.names]
+            m.d.sync += [self.v_done.eq(self.v_n.raw), self.x1_done.eq(self.x1_n.raw)]
+            if self.wb_live:
+                m.d.sync += self.wb_bits.eq(Cat(*self.wb_live))
+            m.next = "X1"
+        with m.State("X1"):
+            if core.rate_steps:
+                m.d.sync += [self.op_assign, self.flags.eq(any_flag([self.flags, self.wb_any, self.rate_flags[0]]))]
+                m.next = "X2"
+            else:
+                self.emit(self.x2_n)
+        if core.rate_steps:
+            with m.State("X2"):
+                m.d.sync += self.pr_assign
+                m.next = "X3"
+            with m.State("X3"):
+                self.emit(self.x2_n)
+
+
+def _signed_quotient(result, numerator):
+    return Mux(numerator < 0, -result.quotient, result.quotient)
 
 
 def make_core(config, variant, *, channels=1, stages=None):
