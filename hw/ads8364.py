@@ -178,8 +178,6 @@ class ADS8364Controller(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        state = self.state
-        restart, read_index, eoc_seen = self.restart, self.read_index, self.eoc_seen
         periods = Signal(range(self.timeout_periods + 1))
         word = self.word
 
@@ -189,7 +187,7 @@ class ADS8364Controller(wiring.Component):
         m.submodules.eoc_sync = FFSynchronizer(self.eoc, eoc_sync, init=1, stages=2)
         m.d.sync += eoc_prev.eq(eoc_sync)
         with m.If(eoc_prev & ~eoc_sync):
-            m.d.sync += eoc_seen.eq(1)
+            m.d.sync += self.eoc_seen.eq(1)
 
         # A2..A0 follow the word one cycle late, even across a reset (reset_less): they never
         # change in the same instant RD rises, not even when a reset ends a read
@@ -199,6 +197,14 @@ class ADS8364Controller(wiring.Component):
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
 
+        self._next_state(m, periods)
+        self._decode_word(m)
+        return m
+
+    def _next_state(self, m, periods):
+        """On each strobe, the next state and the read index, and the EOC timeout's count."""
+        state, restart, read_index, eoc_seen = self.state, self.restart, self.read_index, self.eoc_seen
+        word = self.word
         next_state = Signal.like(state)
         next_index = Signal.like(read_index)
         # the limit compare is registered: periods moves only on a strobe, the compare is read
@@ -248,6 +254,9 @@ class ADS8364Controller(wiring.Component):
                     m.d.sync += restart.eq(2)
             m.d.sync += [state.eq(next_state), read_index.eq(next_index)]
 
+    def _decode_word(self, m):
+        """The pins' word of the period that began."""
+        state, restart, read_index, word = self.state, self.restart, self.read_index, self.word
         # the word of the period that began, decoded from the state one system cycle after the
         # strobe (and registered: no glitches). Deciding the next state and decoding its word in
         # the strobe's own cycle would put both between two registers, 14 LUT levels; this way
@@ -273,4 +282,3 @@ class ADS8364Controller(wiring.Component):
                     m.d.comb += next_word.eq(ControlWord.const(idle_word(self.table[CONV0]["addr"])))
                 m.d.sync += restart.eq(Mux(restart == 0, 0, restart - 1))
             m.d.sync += word.eq(next_word)
-        return m

@@ -221,6 +221,7 @@ class LoopPipeline(Core):
 
         live = {name: Fx(getattr(s0, name).as_signed(), 0, None, self.config.input_format, name)
                 for name in self.config.inputs}
+        memory = None
         if in_memory:
             memory = StateMemory(self.channels, {n: self.config.point_format(p) for n, p in self.state_points.items()},
                                  self.reset_state)
@@ -229,14 +230,23 @@ class LoopPipeline(Core):
             live.update(memory.values(m, s0.channel))
         else:
             live.update({name: self._state_value(regs, name, s0.channel) for name in regs})
-        valid, channel, flags = s0_valid & ~hazard, s0.channel, NO_OVERFLOW
-        in_flight = []  # (valid, channel) of the samples before their write-back
+        valid, channel, flags, live, in_flight, last_flags = self._loop(m, advance, regs, live, s0_valid & ~hazard,
+                                                                        s0.channel)
+        in_flight += self._write_back(m, advance, regs, memory, valid, channel, live)
+        m.d.comb += hazard.eq(reduce(lambda a, b: a | b, [v & (c == s0.channel) for v, c in in_flight], Const(0, 1)))
+        self._after_loop(m, advance, valid, channel, [flags, *last_flags], live)
+        return m
+
+    def _loop(self, m, advance, regs, live, valid, channel):
+        """The loop's steps in their register stages; ``(valid, channel, flags, live, in_flight,
+        last_flags)`` at the end of the last stage (``in_flight``: the (valid, channel) of the
+        samples before their write-back; ``last_flags``: the last stage's, not yet registered)."""
+        flags, in_flight, last_flags = NO_OVERFLOW, [], []
         groups, start = [], 0
         for cut in (*self.cuts[self.stages], len(self.steps)):
             groups.append(self.steps[start:cut])
             start = cut
         reread = set(regs) if self.channels == 1 else set()
-        last_flags = []
         for n, group in enumerate(groups, start=1):
             ops = self.arith(m, prefix=f"s{n}_")
             k = ops.constants(self.constants)
@@ -253,23 +263,27 @@ class LoopPipeline(Core):
             live = {name: value for name, value in live.items() if name in later}
             valid, channel, flags, live = register_stage(m, advance, n, valid, channel, flags, live)
             in_flight.append((valid, channel))
-        # write-back at the end of the last loop stage
-        if in_memory:
+        return valid, channel, flags, live, in_flight, last_flags
+
+    def _write_back(self, m, advance, regs, memory, valid, channel, live):
+        """The write-back at the end of the last loop stage; the (valid, channel) it adds to
+        the samples in flight."""
+        if memory is not None:
             memory.write(m, advance & valid, channel, {name: live[key].raw for name, key in self.writes.items()})
             # the word written at the last clock edge is not yet in what the memory reads
             wrote_valid, wrote_channel = Signal(name="wrote_valid"), Signal.like(channel, name="wrote_channel")
             m.d.sync += [wrote_valid.eq(advance & valid), wrote_channel.eq(channel)]
-            in_flight.append((wrote_valid, wrote_channel))
-        else:
-            # a channel number past the last state updates nothing (one state: the register itself)
-            in_range = channel < self.channels if 1 < self.channels < 2 ** len(channel) else Const(1, 1)
-            with m.If(advance & valid & in_range):
-                m.d.sync += [at(regs[name], channel).eq(live[key].raw) for name, key in self.writes.items()]
-        m.d.comb += hazard.eq(reduce(lambda a, b: a | b, [v & (c == s0.channel) for v, c in in_flight], Const(0, 1)))
+            return [(wrote_valid, wrote_channel)]
+        # a channel number past the last state updates nothing (one state: the register itself)
+        in_range = channel < self.channels if 1 < self.channels < 2 ** len(channel) else Const(1, 1)
+        with m.If(advance & valid & in_range):
+            m.d.sync += [at(regs[name], channel).eq(live[key].raw) for name, key in self.writes.items()]
+        return []
 
-        # after the loop: the output steps, a register stage between two
+    def _after_loop(self, m, advance, valid, channel, pending, live):
+        """The output steps, a register stage between two, and the output register (``pending``:
+        the flags not yet ORed into one register bit)."""
         out = self.outputs(live)
-        pending = [flags, *last_flags]  # flags not yet ORed into one register bit
         steps = self.output_steps()
         for n, step in enumerate(steps, start=1):
             ops = self.arith(m, prefix=f"o{n}_")
@@ -283,5 +297,4 @@ class LoopPipeline(Core):
             m.d.sync += self.o.valid.eq(valid)
             with m.If(valid):
                 write_estimate(m, self, channel, self.final(out), pending)
-        return m
 
