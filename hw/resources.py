@@ -154,67 +154,56 @@ def _is_sequential(cell_type):
     return _is_ff(cell_type) or cell_type == MEMORY_CELL
 
 
+def _bits(cell, direction):
+    """The signal bits (not constants) of a Yosys JSON cell's ports of ``direction``."""
+    for port, d in cell.get("port_directions", {}).items():
+        if d == direction:
+            yield from (b for b in cell["connections"].get(port, []) if isinstance(b, int))
+
+
 def longest_path(module, cost):
     """Largest total ``cost(cell)`` along a combinational path between flip-flops / ports.
 
     ``module`` is a Yosys JSON module; flip-flops start and end paths. Returns
     ``(depth, names)``: the depth and the net names at the path's end.
     """
-    driver = {}  # bit -> cell name
-    for name, cell in module["cells"].items():
-        if _is_sequential(cell["type"]):
-            continue
-        for port, direction in cell.get("port_directions", {}).items():
-            if direction == "output":
-                for bit in cell["connections"].get(port, []):
-                    if isinstance(bit, int):
-                        driver[bit] = name
     cells = module["cells"]
+    driver = {bit: name for name, cell in cells.items() if not _is_sequential(cell["type"])
+              for bit in _bits(cell, "output")}  # bit -> cell name
+    fan_in = {name: [driver[b] for b in _bits(cell, "input") if b in driver] for name, cell in cells.items()}
     depth = {}
-
-    def inputs(name):
-        cell = cells[name]
-        for port, direction in cell.get("port_directions", {}).items():
-            if direction == "input":
-                for bit in cell["connections"].get(port, []):
-                    if isinstance(bit, int) and bit in driver:
-                        yield driver[bit]
-
-    def resolve(start):
-        # iterative post-order DFS: combinational depth of a cell's output; a cell is expanded
-        # once (reconverging paths would otherwise push it once per path)
-        stack, open_ = [(start, False)], set()
-        while stack:
-            name, done = stack.pop()
-            if name in depth:
-                continue
-            if done:
-                depth[name] = cost(cells[name]) + max((depth[i] for i in inputs(name)), default=0)
-                open_.discard(name)
-                continue
-            if name in open_:
-                raise ValueError(f"a combinational loop through cell {name}")
-            open_.add(name)
-            stack.append((name, True))
-            stack.extend((i, False) for i in set(inputs(name)) if i not in depth)
-        return depth[start]
-
+    sinks = [(b, ("ff", name)) for name, cell in cells.items() if _is_sequential(cell["type"])
+             for b in _bits(cell, "input")]  # (bit, what the path ends at)
+    sinks += [(b, ("port", name)) for name, port in module["ports"].items() if port["direction"] == "output"
+              for b in port["bits"] if isinstance(b, int)]
     best, best_sink = 0, None
-    sinks = []  # (bit, what the path ends at)
-    for cell_name, cell in cells.items():
-        if _is_sequential(cell["type"]):
-            for port, direction in cell.get("port_directions", {}).items():
-                if direction == "input":
-                    sinks += [(b, ("ff", cell_name)) for b in cell["connections"].get(port, []) if isinstance(b, int)]
-    for port_name, port in module["ports"].items():
-        if port["direction"] == "output":
-            sinks += [(b, ("port", port_name)) for b in port["bits"] if isinstance(b, int)]
     for bit, sink in sinks:
         if bit in driver:
-            d = resolve(driver[bit])
+            d = _resolve(driver[bit], fan_in, depth, lambda name: cost(cells[name]))
             if d > best:
                 best, best_sink = d, sink
     return best, _sink_names(module, best_sink)
+
+
+def _resolve(start, fan_in, depth, cost):
+    """The combinational depth of ``start``'s output, filling ``depth`` (an iterative post-order
+    walk: a deep netlist would overflow Python's stack; each cell is expanded once, as
+    reconverging paths would otherwise push it once per path)."""
+    stack, open_ = [(start, False)], set()
+    while stack:
+        name, done = stack.pop()
+        if name in depth:
+            continue
+        if done:
+            depth[name] = cost(name) + max((depth[i] for i in fan_in[name]), default=0)
+            open_.discard(name)
+            continue
+        if name in open_:
+            raise ValueError(f"a combinational loop through cell {name}")
+        open_.add(name)
+        stack.append((name, True))
+        stack.extend((i, False) for i in set(fan_in[name]) if i not in depth)
+    return depth[start]
 
 
 def _sink_names(module, sink):

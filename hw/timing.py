@@ -297,6 +297,28 @@ def _origin(arr, bit):
         cur = a[1]
 
 
+def _register_paths(arr, cell, worst, io, budget):
+    """The paths into a register (or block memory) ``cell``: the worst register-to-register
+    path so far, returned, and into ``io`` each input port's worst path (``budget(port)``: its
+    time, ns)."""
+    q = next((b for p in _ports(cell, "output") for b in _bits(cell, p) if isinstance(b, int)), None)
+    # into an M4K block: the route to it, then its input register's setup
+    setup = arr.d("t_su") + (arr.d("t_route_m4k") if cell["type"] == MEMORY_CELL else 0.0)
+    for bit in (b for port in _ports(cell, "input") for b in _bits(cell, port)):
+        if arr.at(bit) is None:
+            continue
+        total = arr.arrival[bit][0] + setup
+        origin = _origin(arr, bit)
+        end = arr.name(q) if q is not None else "register"
+        if origin.startswith("port "):
+            pname = origin[5:]
+            if pname not in io or total > io[pname].delay_ns:
+                io[pname] = arr.path(bit, end, setup, "input", budget(pname))
+        elif worst is None or total > worst.delay_ns:
+            worst = arr.path(bit, end, setup, "reg2reg")
+    return worst
+
+
 def analyse(module, *, period_ns=20.0, derate=DERATE_C8, input_delays=None, output_delays=None, multicycle=None):
     """The timing estimate of a Yosys JSON module (the carry-aware netlist).
 
@@ -308,24 +330,8 @@ def analyse(module, *, period_ns=20.0, derate=DERATE_C8, input_delays=None, outp
     arr = _Arrivals(module, derate, input_delays)
     worst, io = None, {}
     for cell in module["cells"].values():
-        if not _is_sequential(cell["type"]):
-            continue
-        q = next((b for p in _ports(cell, "output") for b in _bits(cell, p) if isinstance(b, int)), None)
-        # into an M4K block: the route to it, then its input register's setup
-        setup = arr.d("t_su") + (arr.d("t_route_m4k") if cell["type"] == MEMORY_CELL else 0.0)
-        for port in _ports(cell, "input"):
-            for bit in _bits(cell, port):
-                if arr.at(bit) is None:
-                    continue
-                total = arr.arrival[bit][0] + setup
-                origin = _origin(arr, bit)
-                end = arr.name(q) if q is not None else "register"
-                if origin.startswith("port "):
-                    pname = origin[5:]
-                    if pname not in io or total > io[pname].delay_ns:
-                        io[pname] = arr.path(bit, end, setup, "input", period_ns * multicycle.get(pname, 1))
-                elif worst is None or total > worst.delay_ns:
-                    worst = arr.path(bit, end, setup, "reg2reg")
+        if _is_sequential(cell["type"]):
+            worst = _register_paths(arr, cell, worst, io, lambda port: period_ns * multicycle.get(port, 1))
     for pname, port in module["ports"].items():
         if port["direction"] != "output" or pname not in output_delays:
             continue
