@@ -192,9 +192,48 @@ def build_program(config, variant, *, channels=1, channel_bits=None):
     for label, value in results + finals:
         if not isinstance(value, Fx):
             raise TypeError(f"{label}: the update must give Fx values")
+    live, order = _live(nodes, results, finals)
 
-    # every node an output, a next state or an overflow flag needs (a write that can overflow
-    # counts even if nothing reads it: its flag is part of the sample's overflow bit)
+    # fixed addresses: constants, then samples; temporaries after them; states in their blocks
+    addr, consts = {}, {}
+    for i in sorted(live):
+        n = nodes[i]
+        if n.op == "const":
+            consts.setdefault(n.key, len(consts))
+            addr[i] = consts[n.key]
+    sample_addrs = {name: len(consts) + j for j, name in enumerate(config.inputs)}
+    state_names = [name for name, _ in states]
+    temp_of, copy_regs, next_temp = _allocate(nodes, order, results, finals, len(consts) + len(sample_addrs))
+    stride_bits = _bits(len(state_names))
+    cbits = channel_bits if channel_bits is not None else _bits(channels)
+    state_base = 1 << max(_bits(next_temp), stride_bits + cbits)
+    state_addrs = {name: state_base + j for j, name in enumerate(state_names)}
+    for i in live:
+        n = nodes[i]
+        if n.op == "input":
+            kind, name = n.key
+            addr[i] = state_addrs[name] if kind == "state" else sample_addrs[name]
+    addr.update(temp_of)
+    depth = state_base + (1 << (stride_bits + cbits))
+    program, width, sizes = _instructions(nodes, order, addr, results, finals, copy_regs, state_addrs)
+
+    init = [0] * depth
+    for raw, a in consts.items():
+        init[a] = raw & ((1 << width) - 1)
+    reset = config.reset_state(variant)
+    for c in range(min(channels, 1 << cbits)):
+        for name, a in state_addrs.items():
+            init[a | c << stride_bits] = reset[name] & ((1 << width) - 1)
+    outputs = tuple((o.name, config.output_format(o.name).width) for o in config.outputs)
+    return Program(tuple(program), tuple(init), state_addrs, sample_addrs, outputs, width,
+                   (sizes["mul_a"], sizes["mul_b"]), sizes["dividend"], sizes["divisor"], sizes["quotient"],
+                   sizes["radicand"], state_base, stride_bits, depth, cbits)
+
+
+def _live(nodes, results, finals):
+    """Every node an output, a next state or an overflow flag needs (a write that can overflow
+    counts even if nothing reads it: its flag is part of the sample's overflow bit), and the
+    operations among them in program order."""
     live = set()
     todo = [v.raw.node for _, v in results + finals] + [i for i, n in enumerate(nodes) if n.op in ("rq", "div", "sqrt")]
     while todo:
@@ -202,34 +241,22 @@ def build_program(config, variant, *, channels=1, channel_bits=None):
         if i not in live:
             live.add(i)
             todo.extend(nodes[i].args)
-    order = [i for i in range(len(nodes)) if i in live and nodes[i].op not in ("input", "const")]
+    return live, [i for i in range(len(nodes)) if i in live and nodes[i].op not in ("input", "const")]
 
-    # fixed addresses: constants, then samples; temporaries after them; states in their blocks
-    addr = {}
-    consts = {}
-    for i in sorted(live):
-        n = nodes[i]
-        if n.op == "const":
-            consts.setdefault(n.key, len(consts))
-            addr[i] = consts[n.key]
-    sample_addrs = {name: len(consts) + j for j, name in enumerate(config.inputs)}
-    temp_base = len(consts) + len(sample_addrs)
 
-    # the end of the update: outputs first (they may read a present state), then the states;
-    # a next state that is another state's present value is copied to a register first
-    state_names = [name for name, _ in states]
+def _allocate(nodes, order, results, finals, temp_base):
+    """Temporary registers from ``temp_base`` on, reused once their value is read for the last
+    time: ``(temp_of, copy_regs, next_temp)``. At the end of the update the outputs are read
+    first (they may read a present state), then the states; a next state that is another
+    state's present value is copied to a register (``copy_regs``) first."""
     uses = {}
     for pos, i in enumerate(order):
         for a in nodes[i].args:
             uses[a] = pos
     tail = len(order)
-    end_reads = [v.raw.node for _, v in results]
-    copies = []
-    for name, v in finals:
-        n = nodes[v.raw.node]
-        if n.op == "input" and n.key != ("state", name):
-            copies.append(v.raw.node)
-    for node in end_reads + copies + [v.raw.node for _, v in finals]:
+    copies = [v.raw.node for name, v in finals
+              if nodes[v.raw.node].op == "input" and nodes[v.raw.node].key != ("state", name)]
+    for node in [v.raw.node for _, v in results] + copies + [v.raw.node for _, v in finals]:
         uses[node] = tail + 1  # read at the end
     for pos, i in enumerate(order):
         uses.setdefault(i, pos + 1)  # read by nothing (a write kept for its flag): free after it
@@ -238,9 +265,8 @@ def build_program(config, variant, *, channels=1, channel_bits=None):
     for node, last in uses.items():
         releases.setdefault(last, []).append(node)
     for pos, i in enumerate(order):
-        for done in releases.get(pos, []):  # operands read for the last time by this operation
-            if done in temp_of:
-                free.append(temp_of[done])
+        # operands read for the last time by this operation
+        free += [temp_of[done] for done in releases.get(pos, []) if done in temp_of]
         if free:
             reg = free.pop()
         else:
@@ -252,23 +278,14 @@ def build_program(config, variant, *, channels=1, channel_bits=None):
             copy_regs[node] = free.pop()
         else:
             copy_regs[node], next_temp = next_temp, next_temp + 1
-    stride_bits = _bits(len(state_names))
-    cbits = channel_bits if channel_bits is not None else _bits(channels)
-    region = 1 << (stride_bits + cbits)
-    state_base = 1 << max(_bits(next_temp), stride_bits + cbits)
-    state_addrs = {name: state_base + j for j, name in enumerate(state_names)}
-    for i in live:
-        n = nodes[i]
-        if n.op == "input":
-            kind, name = n.key
-            addr[i] = state_addrs[name] if kind == "state" else sample_addrs[name]
-    addr.update(temp_of)
-    depth = state_base + region
+    return temp_of, copy_regs, next_temp
 
-    program = []
-    width = 2
-    mul_a = mul_b = 1
-    dividend = divisor = quotient = radicand = 1
+
+def _instructions(nodes, order, addr, results, finals, copy_regs, state_addrs):
+    """The instructions, the register width and the units' sizes (``mul_a``, ``mul_b``,
+    ``dividend``, ``divisor``, ``quotient``, ``radicand``)."""
+    program, width = [], 2
+    sizes = dict.fromkeys(("mul_a", "mul_b", "dividend", "divisor", "quotient", "radicand"), 1)
     for i in order:
         n = nodes[i]
         args = [addr[a] for a in n.args]
@@ -278,7 +295,7 @@ def build_program(config, variant, *, channels=1, channel_bits=None):
             wa, wb = arg_widths
             if wa < wb:  # the wider operand on the multiplier's first input
                 args, (wa, wb) = args[::-1], (wb, wa)
-            mul_a, mul_b = max(mul_a, wa), max(mul_b, wb)
+            sizes["mul_a"], sizes["mul_b"] = max(sizes["mul_a"], wa), max(sizes["mul_b"], wb)
             program.append(Instruction("mul", addr[i], *args))
         elif n.op == "rq":
             fmt = n.fmt
@@ -287,38 +304,25 @@ def build_program(config, variant, *, channels=1, channel_bits=None):
                                        wrap=fmt.overflow is Overflow.WRAP))
             width = max(width, arg_widths[0] + 1, arg_widths[0] - n.shift + 1)
         elif n.op == "div":
-            qbits = quotient_bits(n.fmt)
-            dividend, divisor, quotient = max(dividend, arg_widths[0] + n.shift), max(divisor, arg_widths[1]), \
-                max(quotient, qbits)
+            sizes["dividend"] = max(sizes["dividend"], arg_widths[0] + n.shift)
+            sizes["divisor"] = max(sizes["divisor"], arg_widths[1])
+            sizes["quotient"] = max(sizes["quotient"], quotient_bits(n.fmt))
             program.append(Instruction("div", addr[i], *args, shift=n.shift, width=n.fmt.width))
         elif n.op == "sqrt":
-            radicand = max(radicand, arg_widths[0] + max(n.shift, 0))
+            sizes["radicand"] = max(sizes["radicand"], arg_widths[0] + max(n.shift, 0))
             program.append(Instruction("sqrt", addr[i], args[0], shift=n.shift, width=n.fmt.width))
         elif n.op == "shl":
             program.append(Instruction("shl", addr[i], args[0], shift=n.shift))
         else:
             program.append(Instruction(n.op, addr[i], *args))
-    for j, (_, v) in enumerate(results):
-        program.append(Instruction("out", j, addr[v.raw.node]))
-    for node, reg in copy_regs.items():
-        program.append(Instruction("move", reg, addr[node]))
+    program += [Instruction("out", j, addr[v.raw.node]) for j, (_, v) in enumerate(results)]
+    program += [Instruction("move", reg, addr[node]) for node, reg in copy_regs.items()]
     for name, v in finals:
         src = copy_regs.get(v.raw.node, addr[v.raw.node])
         if src != state_addrs[name]:
             program.append(Instruction("move", state_addrs[name], src))
-    width += 1  # a sign bit to spare: every value is held sign-extended
-    radicand += radicand % 2  # the restoring root takes two radicand bits a step
-
-    init = [0] * depth
-    for raw, a in consts.items():
-        init[a] = raw & ((1 << width) - 1)
-    reset = config.reset_state(variant)
-    for c in range(min(channels, 1 << cbits)):
-        for name, a in state_addrs.items():
-            init[a | c << stride_bits] = reset[name] & ((1 << width) - 1)
-    outputs = tuple((o.name, config.output_format(o.name).width) for o in config.outputs)
-    return Program(tuple(program), tuple(init), state_addrs, sample_addrs, outputs, width, (mul_a, mul_b),
-                   dividend, divisor, quotient, radicand, state_base, stride_bits, depth, cbits)
+    sizes["radicand"] += sizes["radicand"] % 2  # the restoring root takes two radicand bits a step
+    return program, width + 1, sizes  # a sign bit to spare: every value is held sign-extended
 
 
 _ALU = {"move": lambda a, b, c, n: a, "add": lambda a, b, c, n: a + b, "sub": lambda a, b, c, n: a - b,
