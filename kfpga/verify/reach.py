@@ -136,26 +136,7 @@ class _Netlist:
         self.outputs = [n for n, p in gold["ports"].items() if p["direction"] == "output"]
         self.cells, self.init, self.out_bits, self.netnames = {}, {}, {}, {}
         for side, module in (("gold", gold), ("gate", gate)):
-            rename = {}
-            for name, port in module["ports"].items():
-                for i, b in enumerate(port["bits"]):
-                    if port["direction"] == "input" and isinstance(b, int):
-                        rename[b] = ("in", name, i)
-            self.out_bits[side] = {name: [self._bit(side, b, rename) for b in port["bits"]]
-                                   for name, port in module["ports"].items() if port["direction"] == "output"}
-            for name, cell in module["cells"].items():
-                if cell["type"] == "$scopeinfo":
-                    continue
-                conn = {p: [self._bit(side, b, rename) for b in bits] for p, bits in cell["connections"].items()}
-                self.cells[(side, name)] = {**cell, "connections": conn}
-            self.netnames[side] = {name: [self._bit(side, b, rename) for b in net["bits"]]
-                                   for name, net in module["netnames"].items()}
-            for net in module["netnames"].values():
-                init = net.get("attributes", {}).get("init")
-                if isinstance(init, str):
-                    for i, b in enumerate(net["bits"]):
-                        if isinstance(b, int) and i < len(init):
-                            self.init[self._bit(side, b, rename)] = init[len(init) - 1 - i]
+            self._add(side, module)
         self.driver = {}  # net bit -> (cell, port, index)
         for key, cell in self.cells.items():
             for port, bits in cell["connections"].items():
@@ -163,6 +144,26 @@ class _Netlist:
                     for i, b in enumerate(bits):
                         self.driver[b] = (key, port, i)
         self.tainted = self._taint(data_inputs)
+
+    def _add(self, side, module):
+        """One design's cells, outputs, net names and initial values, its bits named by ``side``."""
+        rename = {b: ("in", name, i) for name, port in module["ports"].items() if port["direction"] == "input"
+                  for i, b in enumerate(port["bits"]) if isinstance(b, int)}
+        self.out_bits[side] = {name: [self._bit(side, b, rename) for b in port["bits"]]
+                               for name, port in module["ports"].items() if port["direction"] == "output"}
+        for name, cell in module["cells"].items():
+            if cell["type"] == "$scopeinfo":
+                continue
+            conn = {p: [self._bit(side, b, rename) for b in bits] for p, bits in cell["connections"].items()}
+            self.cells[(side, name)] = {**cell, "connections": conn}
+        self.netnames[side] = {name: [self._bit(side, b, rename) for b in net["bits"]]
+                               for name, net in module["netnames"].items()}
+        for net in module["netnames"].values():
+            init = net.get("attributes", {}).get("init")
+            if isinstance(init, str):
+                for i, b in enumerate(net["bits"]):
+                    if isinstance(b, int) and i < len(init):
+                        self.init[self._bit(side, b, rename)] = init[len(init) - 1 - i]
 
     @staticmethod
     def _bit(side, b, rename):
@@ -245,57 +246,57 @@ def _bits_expr(bits, source):
     return " | ".join(parts) if parts else "0"
 
 
+#: Cells whose expression needs no width: templates on the operand expressions a, b, s.
+_PLAIN = {"$logic_not": "int(({a}) == 0)", "$logic_and": "int(({a}) != 0 and ({b}) != 0)",
+          "$logic_or": "int(({a}) != 0 or ({b}) != 0)", "$reduce_or": "int(({a}) != 0)",
+          "$reduce_bool": "int(({a}) != 0)", "$reduce_xor": "(bin({a}).count('1') & 1)",
+          "$reduce_xnor": "(1 - (bin({a}).count('1') & 1))", "$mux": "(({b}) if ({s}) else ({a}))"}
+_BINARY = {"$add": "+", "$sub": "-", "$mul": "*", "$and": "&", "$or": "|", "$xor": "^", "$xnor": "^"}
+_COMPARE = {"$eq": "==", "$eqx": "==", "$ne": "!=", "$nex": "!=", "$lt": "<", "$le": "<=", "$gt": ">", "$ge": ">="}
+
+
+def _ext(x, w, signed):
+    return f"_sx({x}, {w})" if signed and w else x
+
+
 def _cell_expr(kind, p, a, b, s, widths):
     """The Python expression of one cell's output word (Yosys internal-cell semantics)."""
     wa, wb, wy = widths
     mask_y = (1 << wy) - 1
     both = p.get("A_SIGNED", 0) and p.get("B_SIGNED", 0)
-
-    def ext(x, w, signed):
-        return f"_sx({x}, {w})" if signed and w else x
-
-    if kind in ("$add", "$sub", "$mul", "$and", "$or", "$xor", "$xnor"):
-        op = {"$add": "+", "$sub": "-", "$mul": "*", "$and": "&", "$or": "|", "$xor": "^", "$xnor": "^"}[kind]
-        body = f"({ext(a, wa, both)}) {op} ({ext(b, wb, both)})"
+    if kind in _PLAIN:
+        return _PLAIN[kind].format(a=a, b=b, s=s)
+    if kind in _BINARY:
+        body = f"({_ext(a, wa, both)}) {_BINARY[kind]} ({_ext(b, wb, both)})"
         return f"(~({body})) & {mask_y}" if kind == "$xnor" else f"({body}) & {mask_y}"
     if kind in ("$neg", "$not", "$pos"):
-        x = ext(a, wa, p.get("A_SIGNED", 0))
+        x = _ext(a, wa, p.get("A_SIGNED", 0))
         return {"$neg": f"(-({x})) & {mask_y}", "$not": f"(~({x})) & {mask_y}", "$pos": f"({x}) & {mask_y}"}[kind]
-    if kind == "$logic_not":
-        return f"int(({a}) == 0)"
-    if kind == "$logic_and":
-        return f"int(({a}) != 0 and ({b}) != 0)"
-    if kind == "$logic_or":
-        return f"int(({a}) != 0 or ({b}) != 0)"
     if kind == "$reduce_and":
         return f"int(({a}) == {(1 << wa) - 1})"
-    if kind in ("$reduce_or", "$reduce_bool"):
-        return f"int(({a}) != 0)"
-    if kind in ("$reduce_xor", "$reduce_xnor"):
-        par = f"(bin({a}).count('1') & 1)"
-        return par if kind == "$reduce_xor" else f"(1 - {par})"
-    if kind in ("$eq", "$eqx", "$ne", "$nex", "$lt", "$le", "$gt", "$ge"):
-        op = {"$eq": "==", "$eqx": "==", "$ne": "!=", "$nex": "!=", "$lt": "<", "$le": "<=", "$gt": ">", "$ge": ">="}[kind]
-        return f"int(({ext(a, wa, both)}) {op} ({ext(b, wb, both)}))"
+    if kind in _COMPARE:
+        return f"int(({_ext(a, wa, both)}) {_COMPARE[kind]} ({_ext(b, wb, both)}))"
+    return _shift_expr(kind, p, a, b, widths)
+
+
+def _shift_expr(kind, p, a, b, widths):
+    """The Python expression of a shift cell's output word."""
+    wa, wb, wy = widths
+    mask_y = (1 << wy) - 1
     if kind in ("$shl", "$sshl"):
-        return f"(({ext(a, wa, p.get('A_SIGNED', 0))}) << ({b})) & {mask_y}"
-    width = max(wa, wy)
-    mask_w = (1 << width) - 1
-    a_ext = ext(a, wa, p.get("A_SIGNED", 0))
-    if kind == "$shr":
+        return f"(({_ext(a, wa, p.get('A_SIGNED', 0))}) << ({b})) & {mask_y}"
+    mask_w = (1 << max(wa, wy)) - 1
+    a_ext = _ext(a, wa, p.get("A_SIGNED", 0))
+    if kind == "$shr" or (kind == "$sshr" and not p.get("A_SIGNED", 0)):
         return f"((({a_ext}) & {mask_w}) >> ({b})) & {mask_y}"
     if kind == "$sshr":
-        if p.get("A_SIGNED", 0):
-            return f"(({a_ext}) >> ({b})) & {mask_y}"
-        return f"((({a_ext}) & {mask_w}) >> ({b})) & {mask_y}"
+        return f"(({a_ext}) >> ({b})) & {mask_y}"
     if kind in ("$shift", "$shiftx"):
         # bits shifted in from outside A are x for $shiftx: both designs read them as 0
         base = f"(({a_ext}) & {mask_w})" if kind == "$shift" else f"({a})"
         if p.get("B_SIGNED", 0):
             return f"(_shift({base}, _sx({b}, {wb})) & {mask_y})"
         return f"(({base}) >> ({b})) & {mask_y}"
-    if kind == "$mux":
-        return f"(({b}) if ({s}) else ({a}))"
     raise ValueError(kind)
 
 
@@ -367,30 +368,7 @@ def _compile(net, control):
         if cell["type"] not in _SUPPORTED:
             raise _NotApplicable(f"a {cell['type']} cell ({key[1]}) in the data-independent logic")
     variables = {key: f"v{i}" for i, key in enumerate(di)}
-    layout, init, offset = [], 0, 0  # (register, offset in the state word, width, mask of its kept bits)
-    for key, cell in di.items():
-        if cell["type"] != "$dff":
-            continue
-        mask = value = 0
-        for i, q in enumerate(cell["connections"]["Q"]):
-            if q not in tainted:
-                bit = net.init.get(q)
-                twin = net.cells.get(("gold", key[1])) if key[0] == "gate" else None
-                if bit is None and twin is not None and twin["type"] == "$dff":
-                    # a mutation of the register's output port leaves it on a new net, without the
-                    # init attribute; a mutation rewires, it never changes a power-up value, so
-                    # the register starts as its gold twin does
-                    bit = net.init.get(twin["connections"]["Q"][i])
-                if bit is None and _powers_up_cleared(key[1]):
-                    bit = "0"
-                if bit not in ("0", "1"):
-                    raise _NotApplicable(f"register {key[1]} has no reset value for bit {i}")
-                mask |= 1 << i
-                value |= int(bit) << i
-        width = len(cell["connections"]["Q"])
-        layout.append((key, offset, width, mask))
-        init |= value << offset
-        offset += width
+    layout, init, offset = _register_layout(net, di)
     control_var = {("in", port, i): ("_i", k) for k, (port, i) in enumerate(control)}
 
     def source(bit):
@@ -405,48 +383,11 @@ def _compile(net, control):
         key, _, index = net.driver[bit]
         return variables[key], index
 
-    order, done, visiting = [], set(), set()  # the combinational cells, each after what it reads
-
-    def visit(key):
-        if key in done:
-            return
-        if key in visiting:
-            raise _NotApplicable(f"a combinational loop through {key[1]}")
-        visiting.add(key)
-        cell = di[key]
-        if cell["type"] != "$dff":
-            for port, bits in cell["connections"].items():
-                if cell["port_directions"][port] == "input":
-                    for b in bits:
-                        if isinstance(b, tuple) and b[0] != "in" and b not in tainted and b in net.driver:
-                            visit(net.driver[b][0])
-        visiting.discard(key)
-        done.add(key)
-        order.append(key)
-
-    for key in di:
-        visit(key)
     lines = ["def step(_s, _i):"]
     lines += [f"    {variables[key]} = (_s >> {off}) & {(1 << width) - 1}" for key, off, width, _ in layout]
-    for key in order:
-        cell = di[key]
-        if cell["type"] == "$dff":
-            continue
-        conn, p = cell["connections"], net.params(cell)
-        a = _bits_expr(conn["A"], source) if "A" in conn else "0"
-        b = _bits_expr(conn["B"], source) if "B" in conn else "0"
-        s = _bits_expr(conn["S"], source) if "S" in conn else "0"
-        if cell["type"] == "$pmux":  # one-hot select: the lowest set bit chooses (both designs alike)
-            width = len(conn["Y"])
-            expr = a
-            for k in reversed(range(len(conn["S"]))):
-                bk = _bits_expr(conn["B"][k * width:(k + 1) * width], source)
-                expr = f"(({bk}) if ((_sel >> {k}) & 1) else ({expr}))"
-            lines += [f"    _sel = {s}", f"    {variables[key]} = {expr}"]
-        else:
-            widths = (len(conn.get("A", [])), len(conn.get("B", [])), len(conn["Y"]))
-            lines.append(f"    {variables[key]} = {_cell_expr(cell['type'], p, a, b, s, widths)}")
-    prop = _propagation(net, source, offset)
+    for key in _combinational_order(net, di):
+        lines += _cell_lines(net, di[key], variables[key], source)
+    prop = _Propagation(net, source, offset).result()
     lines[1:1] = prop["read"]
     lines += prop["lines"]
     nxt = []
@@ -462,7 +403,84 @@ def _compile(net, control):
                    (), differ)
 
 
-def _propagation(net, source, base):
+def _register_layout(net, di):
+    """The data-independent registers in the state word: ``(layout, init, width)``, ``layout``
+    a list of (register, offset in the state word, width, mask of its kept bits)."""
+    layout, init, offset = [], 0, 0
+    for key, cell in di.items():
+        if cell["type"] != "$dff":
+            continue
+        mask = value = 0
+        for i, q in enumerate(cell["connections"]["Q"]):
+            if q not in net.tainted:
+                mask |= 1 << i
+                value |= _power_up(net, key, i, q) << i
+        width = len(cell["connections"]["Q"])
+        layout.append((key, offset, width, mask))
+        init |= value << offset
+        offset += width
+    return layout, init, offset
+
+
+def _power_up(net, key, i, q):
+    """The power-up value of bit ``i`` (net ``q``) of register ``key``."""
+    bit = net.init.get(q)
+    twin = net.cells.get(("gold", key[1])) if key[0] == "gate" else None
+    if bit is None and twin is not None and twin["type"] == "$dff":
+        # a mutation of the register's output port leaves it on a new net, without the init
+        # attribute; a mutation rewires, it never changes a power-up value, so the register
+        # starts as its gold twin does
+        bit = net.init.get(twin["connections"]["Q"][i])
+    if bit is None and _powers_up_cleared(key[1]):
+        bit = "0"
+    if bit not in ("0", "1"):
+        raise _NotApplicable(f"register {key[1]} has no reset value for bit {i}")
+    return int(bit)
+
+
+def _combinational_order(net, di):
+    """The combinational cells of ``di``, each after what it reads."""
+    order, done, visiting = [], set(), set()
+
+    def visit(key):
+        if key in done:
+            return
+        if key in visiting:
+            raise _NotApplicable(f"a combinational loop through {key[1]}")
+        visiting.add(key)
+        cell = di[key]
+        if cell["type"] != "$dff":
+            for b in (b for port, bits in cell["connections"].items() if cell["port_directions"][port] == "input"
+                      for b in bits):
+                if isinstance(b, tuple) and b[0] != "in" and b not in net.tainted and b in net.driver:
+                    visit(net.driver[b][0])
+        visiting.discard(key)
+        done.add(key)
+        order.append(key)
+
+    for key in di:
+        visit(key)
+    return [key for key in order if di[key]["type"] != "$dff"]
+
+
+def _cell_lines(net, cell, variable, source):
+    """The step's lines that compute one combinational cell's output word."""
+    conn, p = cell["connections"], net.params(cell)
+    a = _bits_expr(conn["A"], source) if "A" in conn else "0"
+    b = _bits_expr(conn["B"], source) if "B" in conn else "0"
+    s = _bits_expr(conn["S"], source) if "S" in conn else "0"
+    if cell["type"] == "$pmux":  # one-hot select: the lowest set bit chooses (both designs alike)
+        width = len(conn["Y"])
+        expr = a
+        for k in reversed(range(len(conn["S"]))):
+            bk = _bits_expr(conn["B"][k * width:(k + 1) * width], source)
+            expr = f"(({bk}) if ((_sel >> {k}) & 1) else ({expr}))"
+        return [f"    _sel = {s}", f"    {variable} = {expr}"]
+    widths = (len(conn.get("A", [])), len(conn.get("B", [])), len(conn["Y"]))
+    return [f"    {variable} = {_cell_expr(cell['type'], p, a, b, s, widths)}"]
+
+
+class _Propagation:
     """The step's lines that carry a *may differ* bit through the data path, the cells with an
     output bit that depends on the data.
 
@@ -476,21 +494,24 @@ def _propagation(net, source, base):
     values differ (a memory word's initial contents). A step that lets a possible difference
     reach an output gives ``None``: the mutant is then not proven equivalent here.
     """
-    tainted = net.tainted
-    pairs = {}
-    for (side, name), cell in net.cells.items():
-        if side == "gold" and any(b in tainted for b in _outputs(cell)):
-            twin = net.cells.get(("gate", name))
-            if twin is None or twin["type"] != cell["type"]:
-                raise _NotApplicable(f"cell {name} has no twin in the mutant")
-            pairs[name] = (cell, twin)
-    var = {name: f"_d{i}" for i, name in enumerate(pairs)}
-    regs = [name for name, (cell, _) in pairs.items() if cell["type"] == "$dff"]
-    where = {name: base + j for j, name in enumerate(regs)}
 
-    def diff(gbits, tbits):
+    def __init__(self, net, source, base):
+        self.net, self.source, self.tainted = net, source, net.tainted
+        self.pairs = {}
+        for (side, name), cell in net.cells.items():
+            if side == "gold" and any(b in self.tainted for b in _outputs(cell)):
+                twin = net.cells.get(("gate", name))
+                if twin is None or twin["type"] != cell["type"]:
+                    raise _NotApplicable(f"cell {name} has no twin in the mutant")
+                self.pairs[name] = (cell, twin)
+        self.var = {name: f"_d{i}" for i, name in enumerate(self.pairs)}
+        self.regs = [name for name, (cell, _) in self.pairs.items() if cell["type"] == "$dff"]
+        self.where = {name: base + j for j, name in enumerate(self.regs)}
+
+    def diff(self, gbits, tbits):
         """The expression of 'some bit of gold's gbits may differ from gate's tbits'."""
         terms, gold_di, gate_di = set(), [], []
+        net, tainted = self.net, self.tainted
         for g, t in zip(gbits, tbits, strict=True):
             if (g in tainted) != (t in tainted):
                 return "1"
@@ -501,82 +522,100 @@ def _propagation(net, source, base):
                 dg, dt = net.driver.get(g), net.driver.get(t)
                 if dg is None or dt is None or dg[0][1] != dt[0][1] or dg[1:] != dt[1:]:
                     return "1"
-                terms.add(var[dg[0][1]])
+                terms.add(self.var[dg[0][1]])
         if gold_di:
-            terms.add(f"int(({_bits_expr(gold_di, source)}) != ({_bits_expr(gate_di, source)}))")
+            terms.add(f"int(({_bits_expr(gold_di, self.source)}) != ({_bits_expr(gate_di, self.source)}))")
         return " | ".join(sorted(terms)) if terms else "0"
 
+    @staticmethod
     def inputs(cell, twin):
         return [(bits, twin["connections"][port]) for port, bits in cell["connections"].items()
                 if cell["port_directions"][port] == "input"]
 
-    order, done = [], set()
+    def order(self):
+        """The data path's combinational cells, each after what it reads (depth first, without
+        recursion: a data path can be thousands of cells deep)."""
+        order, done = [], set()
+        for name in self.pairs:
+            stack = [(name, False)]
+            while stack:
+                key, expanded = stack.pop()
+                if key in done:
+                    continue
+                if expanded:
+                    done.add(key)
+                    order.append(key)
+                    continue
+                stack.append((key, True))
+                if self.pairs[key][0]["type"] != "$dff":
+                    stack += [(d, False) for d in self._drivers(key) if d not in done]
+        return [name for name in order if self.pairs[name][0]["type"] != "$dff"]
 
-    def visit(name):
-        stack = [(name, False)]
-        while stack:  # depth first, without recursion: a data path can be thousands of cells deep
-            key, expanded = stack.pop()
-            if key in done:
-                continue
-            if expanded:
-                done.add(key)
-                order.append(key)
-                continue
-            stack.append((key, True))
-            cell = pairs[key][0]
-            if cell["type"] != "$dff":
-                for bits, _ in inputs(*pairs[key]):
-                    for b in bits:
-                        if b in tainted and isinstance(b, tuple) and b[0] != "in":
-                            driver = net.driver[b][0][1]
-                            if driver not in done and pairs[driver][0]["type"] != "$dff":
-                                stack.append((driver, False))
+    def _drivers(self, key):
+        """The combinational data-path cells that drive ``key``'s inputs."""
+        for bits, _ in self.inputs(*self.pairs[key]):
+            for b in bits:
+                if b in self.tainted and isinstance(b, tuple) and b[0] != "in":
+                    driver = self.net.driver[b][0][1]
+                    if self.pairs[driver][0]["type"] != "$dff":
+                        yield driver
 
-    for name in pairs:
-        visit(name)
-    read = [f"    {var[name]} = (_s >> {where[name]}) & 1" for name in regs]
-    lines = []
-    for name in order:
-        cell, twin = pairs[name]
-        if cell["type"] == "$dff":
-            continue
+    def cell_lines(self, name):
+        cell, twin = self.pairs[name]
         cg, ct = cell["connections"], twin["connections"]
-        select_known = "S" in cg and not any(b in tainted for b in (*cg["S"], *ct["S"]))
+        select_known = "S" in cg and not any(b in self.tainted for b in (*cg["S"], *ct["S"]))
+        lines = []
         if cell["type"] == "$mux" and select_known:
-            sg, st = _bits_expr(cg["S"], source), _bits_expr(ct["S"], source)
-            expr = f"(({diff(cg['B'], ct['B'])}) if ({sg}) else ({diff(cg['A'], ct['A'])})) if ({sg}) == ({st}) else 1"
+            sg, st = _bits_expr(cg["S"], self.source), _bits_expr(ct["S"], self.source)
+            expr = (f"(({self.diff(cg['B'], ct['B'])}) if ({sg}) else ({self.diff(cg['A'], ct['A'])})) "
+                    f"if ({sg}) == ({st}) else 1")
         elif cell["type"] == "$pmux" and select_known:
             width = len(cg["Y"])
-            sg, st = _bits_expr(cg["S"], source), _bits_expr(ct["S"], source)
+            sg, st = _bits_expr(cg["S"], self.source), _bits_expr(ct["S"], self.source)
             # every input a set select bit chooses (one, if the select is one-hot as it should be)
-            terms = [f"(((_sg >> {k}) & 1) and ({diff(cg['B'][k * width:(k + 1) * width], ct['B'][k * width:(k + 1) * width])}))"
-                     for k in range(len(cg["S"]))]
-            terms.append(f"((_sg == 0) and ({diff(cg['A'], ct['A'])}))")
+            chosen = [(cg["B"][k * width:(k + 1) * width], ct["B"][k * width:(k + 1) * width]) for k in range(len(cg["S"]))]
+            terms = [f"(((_sg >> {k}) & 1) and ({self.diff(g, t)}))" for k, (g, t) in enumerate(chosen)]
+            terms.append(f"((_sg == 0) and ({self.diff(cg['A'], ct['A'])}))")
             lines.append(f"    _sg, _st = {sg}, {st}")
             expr = f"int({' or '.join(terms)}) if _sg == _st else 1"
         else:
-            expr = " | ".join(f"({diff(g, t)})" for g, t in inputs(cell, twin)) or "0"
-        lines.append(f"    {var[name]} = {expr}")
-    for port in net.outputs:
-        gbits, tbits = net.out_bits["gold"][port], net.out_bits["gate"][port]
-        known = [(g, t) for g, t in zip(gbits, tbits, strict=True) if g not in tainted and t not in tainted]
-        if known:  # a data-independent output bit: exactly compared
-            g_expr = _bits_expr([g for g, _ in known], source)
-            t_expr = _bits_expr([t for _, t in known], source)
-            lines += [f"    if ({g_expr}) != ({t_expr}):", f"        _differ.append(('differs', {port!r}))",
-                      "        return None"]
-        rest = [(g, t) for g, t in zip(gbits, tbits, strict=True) if (g, t) not in known]
-        if rest:
-            lines += [f"    if {diff([g for g, _ in rest], [t for _, t in rest])}:",
-                      f"        _differ.append(('may differ', {port!r}))", "        return None"]
-    init = 0
-    for name in regs:
-        cell, twin = pairs[name]
-        qg, qt = cell["connections"]["Q"], twin["connections"]["Q"]
-        if any(g in tainted and net.init.get(g) != net.init.get(t, net.init.get(g)) for g, t in zip(qg, qt, strict=True)):
-            init |= 1 << where[name]
-    nxt = [(diff(pairs[name][0]["connections"]["D"], pairs[name][1]["connections"]["D"]), where[name]) for name in regs]
-    return {"read": read, "lines": lines, "next": nxt, "init": init, "followed": len(pairs)}
+            expr = " | ".join(f"({self.diff(g, t)})" for g, t in self.inputs(cell, twin)) or "0"
+        return [*lines, f"    {self.var[name]} = {expr}"]
+
+    def output_checks(self):
+        """The lines that end the step with ``None`` when an output differs or may differ."""
+        lines, net = [], self.net
+        for port in net.outputs:
+            gbits, tbits = net.out_bits["gold"][port], net.out_bits["gate"][port]
+            known = [(g, t) for g, t in zip(gbits, tbits, strict=True) if g not in self.tainted and t not in self.tainted]
+            if known:  # a data-independent output bit: exactly compared
+                g_expr = _bits_expr([g for g, _ in known], self.source)
+                t_expr = _bits_expr([t for _, t in known], self.source)
+                lines += [f"    if ({g_expr}) != ({t_expr}):", f"        _differ.append(('differs', {port!r}))",
+                          "        return None"]
+            rest = [(g, t) for g, t in zip(gbits, tbits, strict=True) if (g, t) not in known]
+            if rest:
+                lines += [f"    if {self.diff([g for g, _ in rest], [t for _, t in rest])}:",
+                          f"        _differ.append(('may differ', {port!r}))", "        return None"]
+        return lines
+
+    def result(self):
+        """``{"read", "lines", "next", "init", "followed"}``: the lines that read the registers'
+        bits from the state, those that compute and check, the next bits with their places, the
+        initial bits, the number of cells followed."""
+        net = self.net
+        read = [f"    {self.var[name]} = (_s >> {self.where[name]}) & 1" for name in self.regs]
+        lines = [line for name in self.order() for line in self.cell_lines(name)] + self.output_checks()
+        init = 0
+        for name in self.regs:
+            cell, twin = self.pairs[name]
+            qg, qt = cell["connections"]["Q"], twin["connections"]["Q"]
+            if any(g in self.tainted and net.init.get(g) != net.init.get(t, net.init.get(g))
+                   for g, t in zip(qg, qt, strict=True)):
+                init |= 1 << self.where[name]
+        nxt = [(self.diff(self.pairs[name][0]["connections"]["D"], self.pairs[name][1]["connections"]["D"]),
+                self.where[name]) for name in self.regs]
+        return {"read": read, "lines": lines, "next": nxt, "init": init, "followed": len(self.pairs)}
 
 
 def compile_pair(pair_path, data_inputs):
