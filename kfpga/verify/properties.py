@@ -11,6 +11,7 @@ harness built with ``only=name`` holds that property alone, so each is proven by
 
 from __future__ import annotations
 
+from types import SimpleNamespace
 from typing import ClassVar
 
 from amaranth import Elaboratable, Module, Mux, ResetSignal, Signal
@@ -245,116 +246,135 @@ class ControllerProps(Harness):
         hold = w.hold_a & w.hold_b & w.hold_c  # 0 while any HOLD is low
         rst_was = self.past(m, rst, "rst_was", init=1)
         quiet = ~rst & ~rst_was  # no reset now or last cycle
-
-        if self.want("recovery"):
-            m.d.comb += [Assume(ready), Assume(~rst)]
-            since = self.counter(m, "since_conv0", 7, clear=c.state == CONV0, count=strobe)
-            m.d.comb += Assert(since <= self.bound, "back in CONV0 within the bound")
-            illegal = self.past(m, strobe & (c.state >= N_STATES), "was_illegal")
-            illegal2 = self.past(m, illegal, "was_illegal2")
-            with m.If(illegal):
-                m.d.comb += Assert((c.state == CONV0) & (c.restart == 2) & (c.read_index == 0),
-                                   "an illegal state goes to CONV0, restart, read index 0")
-            with m.If(illegal2):
-                m.d.comb += Assert(~w.reset, "the clean start shows RESET low first")
-            m.d.comb += [Cover(illegal2), Cover(since >= self.dut.timeout_periods)]
-
-        if self.want("address stable"):
-            rd_was = self.past(m, w.rd, "rd_was", init=1)
-            addr_was = self.past(m, c.addr, "addr_was")
-            with m.If(~rd_was):  # RD was low: the address did not move, not even as RD rises
-                m.d.comb += Assert(c.addr == addr_was, "A2..A0 stable while RD is low")
-            with m.If(rd_was & ~w.rd):
-                m.d.comb += Assert(c.addr == addr_was, "A2..A0 set a cycle before RD falls")
-            m.d.comb += Cover(rd_was & ~w.rd & (c.addr == (5 if self.six_channel else self.dut.channel)))
-
-        if self.want("HOLD pulse"):
-            hold_was = self.past(m, hold, "hold_was", init=1)
-            fell, rose = hold_was & ~hold, ~hold_was & hold
-            # strobes while HOLD is low, the one in the cycle it falls included (the word moves two
-            # cycles after a strobe: with strobes every other cycle the next one comes with it)
-            low_strobes = Signal(3, name="low_strobes")
-            with m.If(fell):
-                m.d.sync += low_strobes.eq(strobe)
-            with m.Elif(strobe & ~hold & (low_strobes != 7)):
-                m.d.sync += low_strobes.eq(low_strobes + 1)
-            since_fall = self.counter(m, "since_fall", 6, clear=fell, count=strobe)
-            falls = Signal(2, name="hold_falls")
-            reset_pulse = Signal(name="reset_pulse_since_fall")  # RESET low (or a reset) since the last fall
-            with m.If(fell):
-                m.d.sync += reset_pulse.eq(0)
-                with m.If(falls != 3):
-                    m.d.sync += falls.eq(falls + 1)
-            with m.Elif(~w.reset | rst):
-                m.d.sync += reset_pulse.eq(1)
-            with m.If(rose & quiet & ~reset_pulse):
-                m.d.comb += Assert(low_strobes == 1, "HOLD low for one CLK period")
-            m.d.comb += Assert(hold | (low_strobes <= 1) | reset_pulse | rst, "never low for two periods")
-            with m.If(fell & (falls != 0) & ~reset_pulse):
-                m.d.comb += Assert(since_fall >= 20, "no HOLD while a conversion runs")
-            m.d.comb += [Cover(rose & quiet & (low_strobes == 1)), Cover(fell & (falls != 0) & ~reset_pulse)]
-
-        if self.want("RD under CS"):
-            m.d.comb += Assert(w.rd | ~w.cs, "RD low only while CS is low")
-            m.d.comb += Cover(~w.rd)
-
-        if self.want("one word per read"):
-            held = assert_held(m, self, c.o, rst, "no word overwritten")
-            rd_was = self.past(m, w.rd, "rd_was", init=1)
-            new = c.o.valid & ~held
-            # words made minus reads ended: a word is valid a cycle before its RD pulse ends
-            ahead = Signal(range(-2, 3), name="words_ahead")
-            with m.If(rst):
-                m.d.sync += ahead.eq(0)
-            with m.Else():
-                m.d.sync += ahead.eq(ahead + new - (~rd_was & w.rd & ~rst_was))
-            m.d.comb += Assert(rst | (ahead == 0) | (ahead == 1), "one word per read")
-            hold_was = self.past(m, hold, "hold_was", init=1)
-            fell = hold_was & ~hold
-            per_conv = self.counter(m, "words_per_conversion", 3, clear=fell | rst, count=new)
-            clean = Signal(name="clean_since_fall")  # a HOLD fell with no reset or timeout since
-            with m.If(rst):
-                m.d.sync += clean.eq(0)
-            with m.Elif(fell):
-                m.d.sync += clean.eq(1)
-            with m.Elif(~w.reset):
-                m.d.sync += clean.eq(0)
-            with m.If(fell & clean & ~rst):
-                m.d.comb += Assert((per_conv == self.reads) | ((per_conv == 0) & c.timeout),
-                                   "all words of a conversion, or none after a timeout")
-            m.d.comb += Assert(per_conv <= self.reads, "no more words than channels")
-            m.d.comb += [Cover(fell & clean & (per_conv == self.reads)), Cover(held & ~rst & c.o.ready)]
-
-        if self.want("timeout"):
-            # the EOC edge as the controller sees it: the pin through its two synchroniser
-            # flip-flops (which a reset does not clear), then one more
-            s1, s2 = Signal(name="eoc_s1", init=1, reset_less=True), Signal(name="eoc_s2", init=1, reset_less=True)
-            m.d.sync += [s1.eq(eoc), s2.eq(s1)]
-            s3 = self.past(m, s2, "eoc_s3", init=1)
-            started = strobe & (c.state == CONV0) & w.start  # the strobe that ends a conversion's HOLD period
-            came = Signal(name="eoc_came")  # an EOC edge since that strobe
-            with m.If(started | rst):
-                m.d.sync += came.eq(0)
-            with m.Elif(s3 & ~s2):
-                m.d.sync += came.eq(1)
-            periods = self.counter(m, "periods_since_start", 7, clear=started | rst, count=strobe)
-            waiting = Signal(name="waiting")  # from the start until the controller reads or starts over
-            with m.If(started):
-                m.d.sync += waiting.eq(1)
-            with m.Elif(rst | (c.state == READ0) | (c.state == CONV0)):
-                m.d.sync += waiting.eq(0)
-            # the deadline: the strobe ending the (timeout_periods - 1)th CLK period after the
-            # HOLD period (39 for the default 40: the HOLD period is the first of the 40)
-            deadline = strobe & waiting & (periods == self.dut.timeout_periods - 2)
-            missed = self.past(m, deadline & ~came & ~rst, "deadline_missed")
-            flag_was = self.past(m, c.timeout, "timeout_was")
-            rises = c.timeout & ~flag_was & ~rst_was
-            with m.If(rises):
-                m.d.comb += Assert(missed, "the flag rises only at the deadline, without EOC")
-            with m.If(missed & ~rst):
-                m.d.comb += Assert(c.timeout, "no EOC by the deadline: the flag is up")
-            m.d.comb += [Cover(rises), Cover(self.past(m, deadline & came, "deadline_met") & ~c.timeout)]
+        t = SimpleNamespace(c=c, w=w, rst=rst, rst_was=rst_was, quiet=quiet, hold=hold, strobe=strobe, eoc=eoc,
+                            ready=ready)
+        for name, build in (("recovery", self._recovery), ("address stable", self._address_stable),
+                            ("HOLD pulse", self._hold_pulse), ("RD under CS", self._rd_under_cs),
+                            ("one word per read", self._one_word_per_read), ("timeout", self._timeout)):
+            if self.want(name):
+                build(m, t)
         return m
+
+    def _recovery(self, m, t):
+        """The property "recovery" (:attr:`PROPERTIES`)."""
+        c, w, rst, strobe, ready = t.c, t.w, t.rst, t.strobe, t.ready
+        m.d.comb += [Assume(ready), Assume(~rst)]
+        since = self.counter(m, "since_conv0", 7, clear=c.state == CONV0, count=strobe)
+        m.d.comb += Assert(since <= self.bound, "back in CONV0 within the bound")
+        illegal = self.past(m, strobe & (c.state >= N_STATES), "was_illegal")
+        illegal2 = self.past(m, illegal, "was_illegal2")
+        with m.If(illegal):
+            m.d.comb += Assert((c.state == CONV0) & (c.restart == 2) & (c.read_index == 0),
+                               "an illegal state goes to CONV0, restart, read index 0")
+        with m.If(illegal2):
+            m.d.comb += Assert(~w.reset, "the clean start shows RESET low first")
+        m.d.comb += [Cover(illegal2), Cover(since >= self.dut.timeout_periods)]
+
+    def _address_stable(self, m, t):
+        """The property "address stable" (:attr:`PROPERTIES`)."""
+        c, w = t.c, t.w
+        rd_was = self.past(m, w.rd, "rd_was", init=1)
+        addr_was = self.past(m, c.addr, "addr_was")
+        with m.If(~rd_was):  # RD was low: the address did not move, not even as RD rises
+            m.d.comb += Assert(c.addr == addr_was, "A2..A0 stable while RD is low")
+        with m.If(rd_was & ~w.rd):
+            m.d.comb += Assert(c.addr == addr_was, "A2..A0 set a cycle before RD falls")
+        m.d.comb += Cover(rd_was & ~w.rd & (c.addr == (5 if self.six_channel else self.dut.channel)))
+
+    def _hold_pulse(self, m, t):
+        """The property "HOLD pulse" (:attr:`PROPERTIES`)."""
+        w, rst, quiet, hold, strobe = t.w, t.rst, t.quiet, t.hold, t.strobe
+        hold_was = self.past(m, hold, "hold_was", init=1)
+        fell, rose = hold_was & ~hold, ~hold_was & hold
+        # strobes while HOLD is low, the one in the cycle it falls included (the word moves two
+        # cycles after a strobe: with strobes every other cycle the next one comes with it)
+        low_strobes = Signal(3, name="low_strobes")
+        with m.If(fell):
+            m.d.sync += low_strobes.eq(strobe)
+        with m.Elif(strobe & ~hold & (low_strobes != 7)):
+            m.d.sync += low_strobes.eq(low_strobes + 1)
+        since_fall = self.counter(m, "since_fall", 6, clear=fell, count=strobe)
+        falls = Signal(2, name="hold_falls")
+        reset_pulse = Signal(name="reset_pulse_since_fall")  # RESET low (or a reset) since the last fall
+        with m.If(fell):
+            m.d.sync += reset_pulse.eq(0)
+            with m.If(falls != 3):
+                m.d.sync += falls.eq(falls + 1)
+        with m.Elif(~w.reset | rst):
+            m.d.sync += reset_pulse.eq(1)
+        with m.If(rose & quiet & ~reset_pulse):
+            m.d.comb += Assert(low_strobes == 1, "HOLD low for one CLK period")
+        m.d.comb += Assert(hold | (low_strobes <= 1) | reset_pulse | rst, "never low for two periods")
+        with m.If(fell & (falls != 0) & ~reset_pulse):
+            m.d.comb += Assert(since_fall >= 20, "no HOLD while a conversion runs")
+        m.d.comb += [Cover(rose & quiet & (low_strobes == 1)), Cover(fell & (falls != 0) & ~reset_pulse)]
+
+    def _rd_under_cs(self, m, t):
+        """The property "RD under CS" (:attr:`PROPERTIES`)."""
+        w = t.w
+        m.d.comb += Assert(w.rd | ~w.cs, "RD low only while CS is low")
+        m.d.comb += Cover(~w.rd)
+
+    def _one_word_per_read(self, m, t):
+        """The property "one word per read" (:attr:`PROPERTIES`)."""
+        c, w, rst, rst_was, hold = t.c, t.w, t.rst, t.rst_was, t.hold
+        held = assert_held(m, self, c.o, rst, "no word overwritten")
+        rd_was = self.past(m, w.rd, "rd_was", init=1)
+        new = c.o.valid & ~held
+        # words made minus reads ended: a word is valid a cycle before its RD pulse ends
+        ahead = Signal(range(-2, 3), name="words_ahead")
+        with m.If(rst):
+            m.d.sync += ahead.eq(0)
+        with m.Else():
+            m.d.sync += ahead.eq(ahead + new - (~rd_was & w.rd & ~rst_was))
+        m.d.comb += Assert(rst | (ahead == 0) | (ahead == 1), "one word per read")
+        hold_was = self.past(m, hold, "hold_was", init=1)
+        fell = hold_was & ~hold
+        per_conv = self.counter(m, "words_per_conversion", 3, clear=fell | rst, count=new)
+        clean = Signal(name="clean_since_fall")  # a HOLD fell with no reset or timeout since
+        with m.If(rst):
+            m.d.sync += clean.eq(0)
+        with m.Elif(fell):
+            m.d.sync += clean.eq(1)
+        with m.Elif(~w.reset):
+            m.d.sync += clean.eq(0)
+        with m.If(fell & clean & ~rst):
+            m.d.comb += Assert((per_conv == self.reads) | ((per_conv == 0) & c.timeout),
+                               "all words of a conversion, or none after a timeout")
+        m.d.comb += Assert(per_conv <= self.reads, "no more words than channels")
+        m.d.comb += [Cover(fell & clean & (per_conv == self.reads)), Cover(held & ~rst & c.o.ready)]
+
+    def _timeout(self, m, t):
+        """The property "timeout" (:attr:`PROPERTIES`)."""
+        c, w, rst, rst_was, strobe, eoc = t.c, t.w, t.rst, t.rst_was, t.strobe, t.eoc
+        # the EOC edge as the controller sees it: the pin through its two synchroniser
+        # flip-flops (which a reset does not clear), then one more
+        s1, s2 = Signal(name="eoc_s1", init=1, reset_less=True), Signal(name="eoc_s2", init=1, reset_less=True)
+        m.d.sync += [s1.eq(eoc), s2.eq(s1)]
+        s3 = self.past(m, s2, "eoc_s3", init=1)
+        started = strobe & (c.state == CONV0) & w.start  # the strobe that ends a conversion's HOLD period
+        came = Signal(name="eoc_came")  # an EOC edge since that strobe
+        with m.If(started | rst):
+            m.d.sync += came.eq(0)
+        with m.Elif(s3 & ~s2):
+            m.d.sync += came.eq(1)
+        periods = self.counter(m, "periods_since_start", 7, clear=started | rst, count=strobe)
+        waiting = Signal(name="waiting")  # from the start until the controller reads or starts over
+        with m.If(started):
+            m.d.sync += waiting.eq(1)
+        with m.Elif(rst | (c.state == READ0) | (c.state == CONV0)):
+            m.d.sync += waiting.eq(0)
+        # the deadline: the strobe ending the (timeout_periods - 1)th CLK period after the
+        # HOLD period (39 for the default 40: the HOLD period is the first of the 40)
+        deadline = strobe & waiting & (periods == self.dut.timeout_periods - 2)
+        missed = self.past(m, deadline & ~came & ~rst, "deadline_missed")
+        flag_was = self.past(m, c.timeout, "timeout_was")
+        rises = c.timeout & ~flag_was & ~rst_was
+        with m.If(rises):
+            m.d.comb += Assert(missed, "the flag rises only at the deadline, without EOC")
+        with m.If(missed & ~rst):
+            m.d.comb += Assert(c.timeout, "no EOC by the deadline: the flag is up")
+        m.d.comb += [Cover(rises), Cover(self.past(m, deadline & came, "deadline_met") & ~c.timeout)]
 
 
 class StreamProps(Harness):
