@@ -125,26 +125,13 @@ def read_samples(path, *, clip=False, column="y", columns=None, bits=16):
             f"no columns named {' and '.join(repr(c) for c in missing)}"
         raise InputError(f"{path}: line {table.line}: {need} (the header has: {', '.join(names) or 'nothing'})")
     index = {c: names.index(c) for c in wanted}
-    low, high = (CODE_MIN, CODE_MAX) if bits == 16 else (-(1 << (bits - 1)), (1 << (bits - 1)) - 1)
     it = names.index("truth") if "truth" in names else None
     for line, row in table.rows:
         where = f"{path}: line {line}"
         for name, iy in index.items():
-            if iy >= len(row) or not row[iy].strip():
-                raise InputError(f"{where}: no value in column {name!r}")
-            value = _number(row[iy], where, name)
-            if value != int(value):
-                raise InputError(f"{where}: {name} = {row[iy].strip()} is not an integer "
-                                 + ("ADC code" if bits == 16 else "sample"))
-            if not low <= value <= high:
-                if not clip:
-                    raise InputError(
-                        f"{where}: {name} = {row[iy].strip()} is outside the signed {bits}-bit range "
-                        f"[{low}, {high}] (use --clip to saturate such values)"
-                    )
-                value = min(max(value, low), high)
-                clipped += 1
-            codes[name].append(int(value))
+            value, out = _code(row, iy, name, where, bits, clip)
+            clipped += out
+            codes[name].append(value)
         if it is not None:
             if it >= len(row) or not row[it].strip():
                 raise InputError(f"{where}: no value in column 'truth'")
@@ -153,6 +140,24 @@ def read_samples(path, *, clip=False, column="y", columns=None, bits=16):
         raise InputError(f"{path}: no data rows after the header")
     truth = np.array(truths, dtype=np.float64) if it is not None else None
     return Samples({c: np.array(v, dtype=np.int64) for c, v in codes.items()}, truth, clipped, str(path))
+
+
+def _code(row, iy, name, where, bits, clip):
+    """The integer in cell ``iy`` of ``row``, in the signed ``bits``-bit range (saturated when
+    ``clip``), and 1 if it was saturated, else 0."""
+    low, high = (CODE_MIN, CODE_MAX) if bits == 16 else (-(1 << (bits - 1)), (1 << (bits - 1)) - 1)
+    if iy >= len(row) or not row[iy].strip():
+        raise InputError(f"{where}: no value in column {name!r}")
+    value = _number(row[iy], where, name)
+    if value != int(value):
+        raise InputError(f"{where}: {name} = {row[iy].strip()} is not an integer "
+                         + ("ADC code" if bits == 16 else "sample"))
+    if low <= value <= high:
+        return int(value), 0
+    if not clip:
+        raise InputError(f"{where}: {name} = {row[iy].strip()} is outside the signed {bits}-bit range "
+                         f"[{low}, {high}] (use --clip to saturate such values)")
+    return int(min(max(value, low), high)), 1
 
 
 def read_header(path, *, single="y"):

@@ -175,14 +175,10 @@ def register_formats(spec, params, ranges, *, operand_bits=MULTIPLIER_BITS, stat
     names = list(spec.points_for(params))
     points = spec.points
     formats = {}
-
-    def guard(name):
-        return 0 if points[name].constant else GUARD_BITS
-
-    def reach(name):
-        # a point shared by others must cover all of their ranges
-        return max([ranges.get(name, 0.0)] + [ranges.get(n, 0.0) for n in names if points[n].same_as == name])
-
+    guard = {name: 0 if points[name].constant else GUARD_BITS for name in names}
+    sharers = {name: [n for n in names if points[n].same_as == name] for name in names}
+    # a point shared by others must cover all of their ranges
+    reach = {name: max([ranges.get(name, 0.0)] + [ranges.get(n, 0.0) for n in sharers[name]]) for name in names}
     needs = precision_needs(spec, params)
     noisy = {}  # an operand may grow past the multiplier width for these (more pieces per product)
     for name, sigma in (noise or {}).items():
@@ -190,16 +186,13 @@ def register_formats(spec, params, ranges, *, operand_bits=MULTIPLIER_BITS, stat
             # a quarter of the budget each: several roundings add up in one output
             noisy[name] = noise_step_frac(sigma, PRECISION / 4)
             needs[name] = max(needs.get(name, 0), noisy[name])
-
-    def precise(name):
-        # the fraction bits of this point and of the points that share its format
-        return max([needs.get(name, 0)] + [needs.get(n, 0) for n in names if points[n].same_as == name])
-
+    # the fraction bits of each point and of the points that share its format
+    precise = {name: max([needs.get(name, 0)] + [needs.get(n, 0) for n in sharers[name]]) for name in names}
     constants = constant_values(spec, params)
     for name in names:
         point = points[name]
         if point.operand and point.same_as is None:
-            formats[name] = _operand_format(point, reach(name), guard(name), precise(name), noisy.get(name, 0),
+            formats[name] = _operand_format(point, reach[name], guard[name], precise[name], noisy.get(name, 0),
                                             constants.get(name, ()), operand_bits)
     for name in names:
         point = points[name]
@@ -209,8 +202,8 @@ def register_formats(spec, params, ranges, *, operand_bits=MULTIPLIER_BITS, stat
             frac = formats[point.frac].frac_bits if point.frac in formats else 0
         else:
             frac = state_frac if point.frac is None else point.frac
-        frac = max(frac, precise(name))
-        formats[name] = QFormat(bits_for(reach(name), frac) + guard(name), frac, Rounding.NEAREST)
+        frac = max(frac, precise[name])
+        formats[name] = QFormat(bits_for(reach[name], frac) + guard[name], frac, Rounding.NEAREST)
     for name in names:
         if points[name].same_as is not None:
             formats[name] = formats[points[name].same_as]
