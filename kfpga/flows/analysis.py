@@ -297,10 +297,8 @@ def plot_compare(cmp_, path, title=""):
     SQNR, overflows) written on it. The time axis is in seconds when the model has a period T."""
     plt = pyplot()
     n = len(cmp_.fixed_out)
-    period = cmp_.period
-    k = np.arange(n) * (period or 1.0)
-    unit = "time (s)" if period else "sample"
-    raw = cmp_.y  # None when no input observes the plotted output itself
+    k = np.arange(n) * (cmp_.period or 1.0)
+    unit = "time (s)" if cmp_.period else "sample"
     label = f"noisy input {cmp_.metrics.get('measured_input') or 'y'}"
     others = [name for name in cmp_.fixed_all if name != cmp_.output]
     rows = 4 + len(others)
@@ -310,9 +308,27 @@ def plot_compare(cmp_, path, title=""):
     centre = cmp_.settle + int(np.argmax(np.abs(ref[cmp_.settle:])))
     z0 = min(max(centre - 30, 0), max(n - 60, 0))
     z = slice(z0, min(z0 + 60, n))
-    ax = fig.add_subplot(grid[0, :])
-    if raw is not None:
-        ax.plot(k, raw, lw=0.4, color="0.7", label=label)
+    window = max(n // 200, 1)
+    _overview(fig.add_subplot(grid[0, :]), cmp_, k, z, label, title)
+    _zoom(fig.add_subplot(grid[1, :]), cmp_, k, z, label)
+    _error(fig.add_subplot(grid[2, :]), cmp_, k, window)
+    for row, name in enumerate(others, start=3):
+        ax = fig.add_subplot(grid[row, :])
+        ax.plot(k, cmp_.float_all[name], lw=0.8, color="tab:blue", label=f"float {name}")
+        ax.plot(k, cmp_.fixed_all[name], lw=0.8, ls="--", color="tab:red", label=f"fixed {name}")
+        ax.set_ylabel(name)
+        ax.legend(loc="upper right", fontsize=8)
+    _difference(fig.add_subplot(grid[rows - 1, :3]), fig.add_subplot(grid[rows - 1, 3]), cmp_, k, window, unit)
+    for a in fig.axes[:-2]:
+        a.set_xlabel(unit)
+    save_figure(fig, path, dpi=100)
+
+
+def _overview(ax, cmp_, k, z, label, title):
+    """All samples: the input (``cmp_.y``, None when no input observes the plotted output
+    itself), truth, the fixed output, the zoom's span and the figures."""
+    if cmp_.y is not None:
+        ax.plot(k, cmp_.y, lw=0.4, color="0.7", label=label)
     if cmp_.truth is not None:
         ax.plot(k, cmp_.truth, lw=1.0, color="k", label="truth")
     ax.plot(k, cmp_.fixed_out, lw=0.8, color="tab:red", label=f"fixed {cmp_.output}")
@@ -322,49 +338,47 @@ def plot_compare(cmp_, path, title=""):
     ax.set_title(title)
     ax.text(0.01, 0.97, _figures_text(cmp_.metrics), transform=ax.transAxes, va="top", fontsize=8,
             bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "0.7"})
-    ax = fig.add_subplot(grid[1, :])
-    if raw is not None:
-        ax.plot(k[z], raw[z], ".", ms=5, color="0.55", label=label)
+
+
+def _zoom(ax, cmp_, k, z, label):
+    if cmp_.y is not None:
+        ax.plot(k[z], cmp_.y[z], ".", ms=5, color="0.55", label=label)
     if cmp_.truth is not None:
         ax.plot(k[z], cmp_.truth[z], lw=1.4, color="k", label="truth")
     ax.plot(k[z], cmp_.float_out[z], lw=1.0, color="tab:blue", label=f"float {cmp_.output}")
     ax.plot(k[z], cmp_.fixed_out[z], lw=1.0, ls="--", color="tab:red", label=f"fixed {cmp_.output}")
     ax.set_ylabel(f"{cmp_.output} (zoom)")
     ax.legend(loc="upper right", fontsize=8)
-    window = max(n // 200, 1)
-    ax = fig.add_subplot(grid[2, :])
-    if cmp_.truth is not None:
-        if raw is not None:
-            ax.plot(k, _rolling_rms(raw - cmp_.truth, window), lw=0.8, color="0.6", label="input - truth")
-        ax.plot(k, _rolling_rms(cmp_.float_out - cmp_.truth, window), lw=0.9, color="tab:blue", label="float - truth")
-        ax.plot(k, _rolling_rms(cmp_.fixed_out - cmp_.truth, window), lw=0.9, ls="--", color="tab:red",
-                label="fixed - truth")
-        ax.axvline(k[min(cmp_.settle, n - 1)], color="0.4", ls=":", lw=0.8, label="end of settling")
-        ax.legend(loc="upper right", fontsize=8)
-        ax.set_ylabel(f"error, rolling rms\n({window} samples)")
-    else:
+
+
+def _error(ax, cmp_, k, window):
+    """The estimation error against truth as a rolling RMS (input, float, fixed)."""
+    if cmp_.truth is None:
         ax.text(0.5, 0.5, "no truth in the input", ha="center", transform=ax.transAxes)
-    for row, name in enumerate(others, start=3):
-        ax = fig.add_subplot(grid[row, :])
-        ax.plot(k, cmp_.float_all[name], lw=0.8, color="tab:blue", label=f"float {name}")
-        ax.plot(k, cmp_.fixed_all[name], lw=0.8, ls="--", color="tab:red", label=f"fixed {name}")
-        ax.set_ylabel(name)
-        ax.legend(loc="upper right", fontsize=8)
+        return
+    n = len(cmp_.fixed_out)
+    if cmp_.y is not None:
+        ax.plot(k, _rolling_rms(cmp_.y - cmp_.truth, window), lw=0.8, color="0.6", label="input - truth")
+    ax.plot(k, _rolling_rms(cmp_.float_out - cmp_.truth, window), lw=0.9, color="tab:blue", label="float - truth")
+    ax.plot(k, _rolling_rms(cmp_.fixed_out - cmp_.truth, window), lw=0.9, ls="--", color="tab:red",
+            label="fixed - truth")
+    ax.axvline(k[min(cmp_.settle, n - 1)], color="0.4", ls=":", lw=0.8, label="end of settling")
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_ylabel(f"error, rolling rms\n({window} samples)")
+
+
+def _difference(ax, hist, cmp_, k, window, unit):
+    """Fixed - float of the main output in LSB: an envelope and a rolling RMS, and a histogram."""
     diff = (cmp_.fixed_out - cmp_.float_out) / cmp_.lsb
-    ax = fig.add_subplot(grid[rows - 1, :3])
     centres, lows, highs = _envelope(diff, 400)
-    ax.fill_between(centres * (period or 1.0), lows, highs, color="tab:purple", alpha=0.4, lw=0, label="range")
+    ax.fill_between(centres * (cmp_.period or 1.0), lows, highs, color="tab:purple", alpha=0.4, lw=0, label="range")
     ax.plot(k, _rolling_rms(diff, window), lw=0.8, color="tab:purple", label="rolling rms")
     ax.set_ylabel(f"fixed - float of {cmp_.output}\n(LSB = {cmp_.lsb:g})")
     ax.set_xlabel(unit)
     ax.legend(loc="upper right", fontsize=8)
-    ax = fig.add_subplot(grid[rows - 1, 3])
-    ax.hist(diff[cmp_.settle:], bins=60, color="tab:purple", alpha=0.7)
-    ax.set_xlabel("fixed - float (LSB)")
-    ax.set_ylabel("samples")
-    for a in fig.axes[:-2]:
-        a.set_xlabel(unit)
-    save_figure(fig, path, dpi=100)
+    hist.hist(diff[cmp_.settle:], bins=60, color="tab:purple", alpha=0.7)
+    hist.set_xlabel("fixed - float (LSB)")
+    hist.set_ylabel("samples")
 
 
 def plot_sweep(rows, narrowest, path, title="", budget=0.01):
