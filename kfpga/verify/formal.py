@@ -110,10 +110,23 @@ def jobs():
         for prop in p.ClockDividerProps.PROPERTIES:
             out.append(Job(f"clock divider /{ratio}", prop, lambda only, r=ratio: p.ClockDividerProps(r, only=only),
                            "prove", 3 * ratio + 4, 4 * ratio))
-    # the divider: k-induction on a small instance, with the restoring step's invariant stated
-    # (induction then needs only a couple of steps); the core's widths by BMC from reset over one
-    # whole division, every dividend and divisor (the invariant's multiplier at those widths is
-    # beyond the solver in one step)
+    out += _divider_jobs(p) + _controller_jobs(p)
+    for label, latency, drain, capacity, make_core, limit, startup in _cores():
+        for prop in p.StreamProps.PROPERTIES:
+            # the output contract needs a result made and held: one update; the others a drain too
+            depth = latency + 8 if prop == "output contract" else drain + latency + 4
+            depth = depth if limit is None else min(depth, limit)  # a core may state the solver's reach
+            out.append(Job(label, prop, lambda only, c=make_core, k=capacity, d=drain, s=startup:
+                           p.StreamProps(c(), k, d, only=only, startup=s), "bmc", depth, depth, syn="twin" in label))
+    return out
+
+
+def _divider_jobs(p):
+    """The divider: k-induction on a small instance, with the restoring step's invariant stated
+    (induction then needs only a couple of steps); the core's widths by BMC from reset over one
+    whole division, every dividend and divisor (the invariant's multiplier at those widths is
+    beyond the solver in one step)."""
+    out = []
     widths = tuple(divider_widths().values())
     for w, mode in (((6, 4, 3), "prove"), ((8, 5, 5), "prove"), (widths, "bmc")):
         label = f"divider {w[0]}/{w[1]}->{w[2]}"
@@ -123,6 +136,11 @@ def jobs():
                 continue  # q*d <= n < (q+1)*d at 17 x 18 bits: beyond the solver (hours); proven above
             out.append(Job(label, prop, lambda only, w=w, inv=mode == "prove": p.DividerProps(*w, only=only, invariants=inv),
                            mode, depth, 2 * w[2] + 8))
+    return out
+
+
+def _controller_jobs(p):
+    out = []
     for six, label in ((False, "controller C0"), (True, "controller 6 ch")):
         reads = 6 if six else 1
         conversion = 2 * (20 + 2 * reads + 3)  # system cycles of one conversion at the fastest strobe
@@ -138,13 +156,6 @@ def jobs():
             else:
                 # one whole conversion after the reset sequence, and the next HOLD
                 out.append(Job(label, prop, make, "bmc", conversion + 16, conversion + 16, syn=True))
-    for label, latency, drain, capacity, make_core, limit, startup in _cores():
-        for prop in p.StreamProps.PROPERTIES:
-            # the output contract needs a result made and held: one update; the others a drain too
-            depth = latency + 8 if prop == "output contract" else drain + latency + 4
-            depth = depth if limit is None else min(depth, limit)  # a core may state the solver's reach
-            out.append(Job(label, prop, lambda only, c=make_core, k=capacity, d=drain, s=startup:
-                           p.StreamProps(c(), k, d, only=only, startup=s), "bmc", depth, depth, syn="twin" in label))
     return out
 
 

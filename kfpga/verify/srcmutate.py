@@ -124,6 +124,30 @@ def _is_design_statement(stmt):
     return isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call)
 
 
+def _site(node, parents):
+    """The mutation of ``node`` (under ``parents``), ``(operator, node, replacement text)``, or
+    None."""
+    if isinstance(node, ast.BinOp) and type(node.op) in _SWAPS:
+        name, op = _SWAPS[type(node.op)]
+        return name, node, f"({ast.unparse(ast.BinOp(node.left, op(), node.right))})"
+    if isinstance(node, ast.Compare) and len(node.ops) == 1 and type(node.ops[0]) in _COMPARE:
+        name, op = _COMPARE[type(node.ops[0])]
+        return name, node, f"({ast.unparse(ast.Compare(node.left, [op()], node.comparators))})"
+    if (isinstance(node, ast.Constant) and isinstance(node.value, int) and not isinstance(node.value, bool)
+            and not (parents and isinstance(parents[-1], ast.Expr))):
+        return "const+-1", node, repr(node.value + (1 if node.value % 2 == 0 else -1))
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "Mux" and len(node.args) == 3:
+        a, b, c = node.args
+        return "Mux swap", node, f"Mux({ast.unparse(a)}, {ast.unparse(c)}, {ast.unparse(b)})"
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in ("If", "Elif") \
+            and node.args:
+        cond = node.args[0]
+        return "not", cond, f"~({ast.unparse(cond)})"
+    if isinstance(node, ast.stmt) and _is_design_statement(node):
+        return "drop", node, "pass"
+    return None
+
+
 def sites(path, source=None):
     """Every mutation of the RTL-building code of ``path``: ``[(operator, node, replacement text)]``,
     each replacement valid Python."""
@@ -140,27 +164,10 @@ def sites(path, source=None):
                 if isinstance(child, ast.Expr) and isinstance(child.value, ast.Constant):
                     continue  # a docstring
                 stack.append((child, (*parents, node)))
-            if _skipped(node, parents) or not hasattr(node, "lineno"):
-                continue
-            if isinstance(node, ast.BinOp) and type(node.op) in _SWAPS:
-                name, op = _SWAPS[type(node.op)]
-                found.append((name, node, f"({ast.unparse(ast.BinOp(node.left, op(), node.right))})"))
-            elif isinstance(node, ast.Compare) and len(node.ops) == 1 and type(node.ops[0]) in _COMPARE:
-                name, op = _COMPARE[type(node.ops[0])]
-                found.append((name, node, f"({ast.unparse(ast.Compare(node.left, [op()], node.comparators))})"))
-            elif (isinstance(node, ast.Constant) and isinstance(node.value, int) and not isinstance(node.value, bool)
-                  and not (parents and isinstance(parents[-1], ast.Expr))):
-                found.append(("const+-1", node, repr(node.value + (1 if node.value % 2 == 0 else -1))))
-            elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "Mux"
-                  and len(node.args) == 3):
-                a, b, c = node.args
-                found.append(("Mux swap", node, f"Mux({ast.unparse(a)}, {ast.unparse(c)}, {ast.unparse(b)})"))
-            elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in ("If", "Elif")
-                  and node.args):
-                cond = node.args[0]
-                found.append(("not", cond, f"~({ast.unparse(cond)})"))
-            elif isinstance(node, ast.stmt) and _is_design_statement(node):
-                found.append(("drop", node, "pass"))
+            if not _skipped(node, parents) and hasattr(node, "lineno"):
+                site = _site(node, parents)
+                if site is not None:
+                    found.append(site)
     unique = []
     for operator, node, text in found:  # a nested function is walked with its parent too
         key = (operator, node.lineno, node.col_offset, node.end_lineno, node.end_col_offset)
