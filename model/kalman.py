@@ -68,6 +68,42 @@ def _square(name, value):
     return len(rows), (len(rows[0]) if rows else 0)
 
 
+
+def _start_vector(x0, n):
+    """``x0`` (default zeros) as ``n`` numbers."""
+    if x0 is None:
+        return (0.0,) * n
+    try:
+        values = list(x0)
+    except TypeError:
+        raise TypeError(f"x0 must be a list of {n} numbers, not {x0!r}") from None
+    if len(values) != n:
+        raise ValueError(f"x0 must have {n} entries (one per state), not {len(values)}: {x0!r}")
+    return tuple(number(f"x0[{i}]", v) for i, v in enumerate(values))
+
+
+def _observation_names(observations, m):
+    """The ``m`` observations' names (default y, or y1, y2), checked."""
+    names = tuple(observations) or (("y",) if m == 1 else tuple(f"y{j + 1}" for j in range(m)))
+    if len(names) != m or not all(isinstance(v, str) and v.isidentifier() for v in names) or len(set(names)) != m:
+        raise ValueError(f"observations must be {m} different names (letters, digits, _), not {observations!r}")
+    if {"channel", "overflow"} & set(names) or any(v.startswith(("x", "yhat")) and v[1:].isdigit() for v in names):
+        raise ValueError(f"observations must not be named like an output or a stream field, not {names!r}")
+    return names
+
+
+def _adc_channels(adc, m):
+    """The ADC channel of each of the ``m`` observations, checked."""
+    try:
+        channels = list(adc)
+    except TypeError:
+        raise TypeError(f"adc must be a list of {m} ADC channels (0..5), not {adc!r}") from None
+    if (len(channels) != m or not all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c <= 5 for c in channels)
+            or len(set(channels)) != m):
+        raise ValueError(f"adc must be {m} different ADC channels 0..5 (A0..C1), one per observation, not {adc!r}")
+    return tuple(channels)
+
+
 @dataclass(frozen=True, kw_only=True)
 class StateSpaceParams:
     """A linear state-space model (defaults: the paper's 2-state constant-velocity model).
@@ -130,10 +166,9 @@ class StateSpaceParams:
         if not 1 <= m <= MAX_OBS or hcols != n:
             raise ValueError(f"H must be m x {n} (m = 1..{MAX_OBS} observations of the {n} states), not {m} x {hcols}")
         s(self, "H", matrix("H", self.H, m, n))
-        for i, row in enumerate(self.H):
-            for j, h in enumerate(row):
-                if not free(h):
-                    raise ValueError(f"H[{i}][{j}] = {h!r}: H must select states (entries 0 or +-2**k)")
+        bad = next(((i, j, h) for i, row in enumerate(self.H) for j, h in enumerate(row) if not free(h)), None)
+        if bad is not None:
+            raise ValueError(f"H[{bad[0]}][{bad[1]}] = {bad[2]!r}: H must select states (entries 0 or +-2**k)")
         rows, p = _square("G", self.G)
         if rows != n or not 1 <= p <= MAX_STATES:
             raise ValueError(f"G must be {n} x p (p = 1..{MAX_STATES} noise inputs), not {rows} x {p}")
@@ -147,35 +182,14 @@ class StateSpaceParams:
         if self.P0 is None:
             s(self, "P0", tuple(tuple(10.0 if i == j else 0.0 for j in range(n)) for i in range(n)))
         s(self, "P0", matrix("P0", self.P0, n, n, symmetric=True, positive_definite=True))
-        if self.x0 is None:
-            s(self, "x0", (0.0,) * n)
-        try:
-            x0 = list(self.x0)
-        except TypeError:
-            raise TypeError(f"x0 must be a list of {n} numbers, not {self.x0!r}") from None
-        if len(x0) != n:
-            raise ValueError(f"x0 must have {n} entries (one per state), not {len(x0)}: {self.x0!r}")
-        s(self, "x0", tuple(number(f"x0[{i}]", v) for i, v in enumerate(x0)))
+        s(self, "x0", _start_vector(self.x0, n))
         check_measured_start(self.x0, self.H)
         s(self, "T", number("T", self.T, minimum=0.0, strict=True))
-        names = tuple(self.observations) or (("y",) if m == 1 else tuple(f"y{j + 1}" for j in range(m)))
-        if len(names) != m or not all(isinstance(v, str) and v.isidentifier() for v in names) or len(set(names)) != m:
-            raise ValueError(f"observations must be {m} different names (letters, digits, _), not {self.observations!r}")
-        if {"channel", "overflow"} & set(names) or any(v.startswith(("x", "yhat")) and v[1:].isdigit() for v in names):
-            raise ValueError(f"observations must not be named like an output or a stream field, not {names!r}")
-        s(self, "observations", names)
+        s(self, "observations", _observation_names(self.observations, m))
         if self.gain is not None:
             s(self, "gain", matrix("gain", self.gain, n, m))
         if self.adc is not None:
-            try:
-                adc = list(self.adc)
-            except TypeError:
-                raise TypeError(f"adc must be a list of {m} ADC channels (0..5), not {self.adc!r}") from None
-            if (len(adc) != m or not all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c <= 5 for c in adc)
-                    or len(set(adc)) != m):
-                raise ValueError(f"adc must be {m} different ADC channels 0..5 (A0..C1), one per observation, "
-                                 f"not {self.adc!r}")
-            s(self, "adc", tuple(adc))
+            s(self, "adc", _adc_channels(self.adc, m))
         if start.measured(self) and not start_plan(self)[0]:
             raise ValueError('init = "measurement" needs an observation that selects one state alone (a row of H '
                              "with one nonzero entry): no state of this model is measured by itself")
@@ -670,37 +684,25 @@ def _fp_rounded(params, i, c):
 
 
 def _all_points():
-    pts = []
-    for i in range(1, MAX_STATES + 1):
-        pts.append(Point(f"x{i}", f"state x{i} (output)"))
-    for i in range(1, MAX_STATES + 1):
-        pts.append(Point(f"xl{i}", f"predicted state xl{i} = (F x){i}", same_as=f"x{i}"))
-    for j in range(1, MAX_OBS + 1):
-        pts.append(Point(f"yh{j}", f"predicted observation yhat{j} = (H xl){j} (output)"))
-    for j in range(1, MAX_OBS + 1):
-        pts.append(Point(f"e{j}", f"innovation e{j} = y{j} - yhat{j}", role="operand"))
-    for i in range(1, MAX_STATES + 1):
-        pts.append(Point(f"k{i}", f"gains of state {i}: row {i} of K (constants, or the divider's quotients)",
-                         role="operand"))
-    for i in range(1, MAX_STATES + 1):
-        for j in range(1, MAX_STATES + 1):
-            pts.append(Point(f"f{i}{j}", f"F[{i - 1}][{j - 1}], when it is not 0 or +-2**k (a constant)", role="operand",
-                             constant=True))
-    for j in range(1, MAX_STATES + 1):
-        pts.append(Point(f"xo{j}", f"state x{j} rounded into the operand of its products by F", role="operand"))
-    for i in range(1, MAX_STATES + 1):
-        for j in range(i, MAX_STATES + 1):
-            pts.append(Point(f"p{i}{j}", f"covariance P{i}{j} (state)", variants=("full",), frac=f"pl{i}{j}"))
-    for i in range(1, MAX_STATES + 1):
-        for j in range(1, MAX_STATES + 1):
-            pts.append(Point(f"fp{i}{j}", f"(F P){i}{j} rounded into the operand of its products by F (time-varying)",
-                             role="operand", variants=("full",)))
-    for i in range(1, MAX_STATES + 1):
-        for j in range(i, MAX_STATES + 1):
-            pts.append(Point(f"pl{i}{j}", f"predicted covariance Pl{i}{j}", role="operand", variants=("full",)))
+    states, obs = range(1, MAX_STATES + 1), range(1, MAX_OBS + 1)
+    pts = [Point(f"x{i}", f"state x{i} (output)") for i in states]
+    pts += [Point(f"xl{i}", f"predicted state xl{i} = (F x){i}", same_as=f"x{i}") for i in states]
+    pts += [Point(f"yh{j}", f"predicted observation yhat{j} = (H xl){j} (output)") for j in obs]
+    pts += [Point(f"e{j}", f"innovation e{j} = y{j} - yhat{j}", role="operand") for j in obs]
+    pts += [Point(f"k{i}", f"gains of state {i}: row {i} of K (constants, or the divider's quotients)", role="operand")
+            for i in states]
+    pts += [Point(f"f{i}{j}", f"F[{i - 1}][{j - 1}], when it is not 0 or +-2**k (a constant)", role="operand",
+                  constant=True) for i in states for j in states]
+    pts += [Point(f"xo{j}", f"state x{j} rounded into the operand of its products by F", role="operand") for j in states]
+    pts += [Point(f"p{i}{j}", f"covariance P{i}{j} (state)", variants=("full",), frac=f"pl{i}{j}")
+            for i in states for j in range(i, MAX_STATES + 1)]
+    pts += [Point(f"fp{i}{j}", f"(F P){i}{j} rounded into the operand of its products by F (time-varying)",
+                  role="operand", variants=("full",)) for i in states for j in states]
+    pts += [Point(f"pl{i}{j}", f"predicted covariance Pl{i}{j}", role="operand", variants=("full",))
+            for i in states for j in range(i, MAX_STATES + 1)]
     pts.append(Point("s", "innovation variance S = H Pl H^T + R (divisor)", variants=("full",), frac="pl11"))
-    for name, what in (("s11", "S11"), ("s12", "S12"), ("s22", "S22")):
-        pts.append(Point(name, f"innovation covariance {what} (two observations)", role="operand", variants=("full",)))
+    pts += [Point(name, f"innovation covariance {what} (two observations)", role="operand", variants=("full",))
+            for name, what in (("s11", "S11"), ("s12", "S12"), ("s22", "S22"))]
     pts.append(Point("det", "det S = S11 S22 - S12^2 (the divisor, two observations)", variants=("full",), frac="s11"))
     pts.append(Point("kn", "numerators of K = Pl H^T adj(S) (two observations)", variants=("full",), frac="pl11"))
     return {p.name: p for p in pts}
@@ -762,7 +764,20 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
             formats[f"e{j + 1}"] = QFormat(e.int_bits, want, e.rounding, e.overflow)
     _f_formats(params, ranges, formats)
     _loop_formats(params, formats, err)
-    # the predicted covariance that feeds the division: its guard bits, and P as fine
+    _covariance_formats(params, formats)
+    # a predicted observation that is one predicted state (H selects it) keeps that state's format:
+    # then it is no extra logic
+    for j, row in enumerate(params.H):
+        picks = [i for i, h in enumerate(row) if h != 0]
+        if len(picks) == 1 and row[picks[0]] == 1:
+            formats[f"yh{j + 1}"] = formats[f"xl{picks[0] + 1}"]
+    return formats
+
+
+def _covariance_formats(params, formats):
+    """The predicted covariance that feeds the division: its guard bits, and P as fine; S as
+    fine as Pl; (F P)_ic, which feeds Pl_ij through F_jc, as fine as the finest of those, two
+    bits finer."""
     for i in range(params.n):
         for j in range(i, params.n):
             name = f"pl{i + 1}{j + 1}"
@@ -774,9 +789,8 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
                 if p.frac_bits < frac:
                     formats[f"p{i + 1}{j + 1}"] = QFormat(p.int_bits, frac, p.rounding, p.overflow)
     if params.m == 1 and "s" in formats and "pl11" in formats and formats["s"].frac_bits < formats["pl11"].frac_bits:
-        s = formats["s"]  # S = H Pl H^T + R as fine as Pl
+        s = formats["s"]
         formats["s"] = QFormat(s.int_bits, formats["pl11"].frac_bits, s.rounding, s.overflow)
-    # (F P)_ic feeds Pl_ij through F_jc: as fine as the finest of those, two bits finer
     for i in range(params.n):
         for c in range(params.n):
             name = f"fp{i + 1}{c + 1}"
@@ -785,13 +799,6 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
                 fp = formats[name]
                 if fine > fp.frac_bits:
                     formats[name] = QFormat(fp.int_bits, min(fine, MAX_OPERAND_BITS - fp.int_bits), fp.rounding, fp.overflow)
-    # a predicted observation that is one predicted state (H selects it) keeps that state's format:
-    # then it is no extra logic
-    for j, row in enumerate(params.H):
-        picks = [i for i, h in enumerate(row) if h != 0]
-        if len(picks) == 1 and row[picks[0]] == 1:
-            formats[f"yh{j + 1}"] = formats[f"xl{picks[0] + 1}"]
-    return formats
 
 
 def _loop_formats(params, formats, err):
