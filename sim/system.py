@@ -455,30 +455,14 @@ def run(built, *, params, samples, on_progress=None, tag=None, timeout_s=None):
     step = max(samples // 100, 1)
     cmd = [*built.command, f"+samples={samples}", f"+max_cycles={max_cycles}", f"+progress={step}", f"+dir={run_dir}"]
     t1 = time.perf_counter()
-    tail = collections.deque(maxlen=40)
     if timeout_s is None:  # wall seconds: ten times what the slower simulator needs, and then some
         timeout_s = 120 + samples * (0.07 if built.simulator == "icarus" else 0.001)
-    with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=run_dir) as proc:
-        watchdog = threading.Timer(timeout_s, proc.kill)
-        watchdog.start()
-        try:
-            for line in proc.stdout:
-                if line.startswith("progress "):
-                    if on_progress:
-                        on_progress(int(line.split()[1]))
-                else:
-                    tail.append(line.rstrip())
-            proc.wait()
-        finally:
-            expired = not watchdog.is_alive() and proc.returncode is not None and proc.returncode < 0
-            watchdog.cancel()
-    if expired:
-        raise SystemRunFailed(f"{built.simulator}: no end after {timeout_s:.0f} s; stopped")
+    returncode, tail = _simulate(cmd, run_dir, timeout_s, on_progress, built.simulator)
     sim_wall = time.perf_counter() - t1
     (run_dir / "sim.log").write_text("\n".join(tail) + "\n")
     summary_path = run_dir / "summary.txt"
-    if proc.returncode or not summary_path.exists() or not summary_path.read_text().strip():
-        raise SystemRunFailed(f"{built.simulator}: the simulation ended without a summary (exit {proc.returncode}):\n"
+    if returncode or not summary_path.exists() or not summary_path.read_text().strip():
+        raise SystemRunFailed(f"{built.simulator}: the simulation ended without a summary (exit {returncode}):\n"
                               + "\n".join(tail))
     (n_out, n_reads, conv_done, eoc_pulses, errors, first_error, first_error_ns, _exhausted, overflow, timeout,
      cycles, time_ns, status) = (int(v) for v in summary_path.read_text().split())
@@ -501,6 +485,29 @@ def run(built, *, params, samples, on_progress=None, tag=None, timeout_s=None):
                    "adc_errors": errors, "wall_total_s": time.perf_counter() - t0, "run_dir": str(run_dir),
                    "updates": len(records.updates())})
     return report
+
+
+def _simulate(cmd, run_dir, timeout_s, on_progress, simulator):
+    """Run the simulator's ``cmd`` in ``run_dir``, its progress lines to ``on_progress``, killed
+    after ``timeout_s`` wall seconds; ``(exit code, the last 40 other lines)``."""
+    tail = collections.deque(maxlen=40)
+    with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=run_dir) as proc:
+        watchdog = threading.Timer(timeout_s, proc.kill)
+        watchdog.start()
+        try:
+            for line in proc.stdout:
+                if line.startswith("progress "):
+                    if on_progress:
+                        on_progress(int(line.split()[1]))
+                else:
+                    tail.append(line.rstrip())
+            proc.wait()
+        finally:
+            expired = not watchdog.is_alive() and proc.returncode is not None and proc.returncode < 0
+            watchdog.cancel()
+    if expired:
+        raise SystemRunFailed(f"{simulator}: no end after {timeout_s:.0f} s; stopped")
+    return proc.returncode, tail
 
 
 def cycle_budget(built, records, samples):

@@ -175,55 +175,67 @@ def _first(script, pin, value, after=0):
     return next(k for k in range(after, len(script)) if script[k][pin] == value)
 
 
+def _clk_period(s):
+    _block(s, 300, [0, 0, 1, 1, 1, 0, 0, 0, 0, 0])  # rises 7 periods apart
+
+
+def _clk_high(s):
+    _block(s, 300, [0, 0, 0, 0, 0, 1, 1, 0, 0, 0])  # high for 40 ns
+
+
+def _clk_low(s):
+    _block(s, 300, [1, 1, 1, 1, 1, 1, 0, 0, 1, 1])  # low for 40 ns, period 260 ns
+
+
+def _hold_converting(s):
+    k = _first(s, "hold_c", 0) + 60
+    s[k]["hold_c"] = 0
+
+
+def _hold_in_reset(s):
+    k = _first(s, "hold_c", 0)
+    for j in range(k - 5, k + 3):
+        s[j]["reset"] = 0
+
+
+def _rd_short(s):
+    k = _first(s, "rd", 0)
+    for j in range(k + 1, k + 10):
+        s[j]["rd"] = 1
+
+
+def _addr_rd_low(s):
+    k = _first(s, "rd", 0) + 4
+    for j in range(k, k + 6):
+        s[j]["addr"] = 5
+
+
+def _addr_rd_rise(s):
+    k = _first(s, "rd", 1, after=_first(s, "rd", 0))
+    s[k]["addr"] = 5
+    s[k + 1]["addr"] = 5
+
+
+def _addr_setup(s):
+    k = _first(s, "rd", 0)
+    for j in range(k - 10, k):
+        s[j]["addr"] = 2
+
+
+def _wr_low(s):
+    s[100]["wr"] = 0
+
+
+def _addr_mode(s):
+    k = _first(s, "cs", 0)
+    for j in range(k, k + 22):
+        s[j]["addr"] = 6
+
+
 def violation_cases():
-    def clk_period(s):
-        _block(s, 300, [0, 0, 1, 1, 1, 0, 0, 0, 0, 0])  # rises 7 periods apart
-
-    def clk_high(s):
-        _block(s, 300, [0, 0, 0, 0, 0, 1, 1, 0, 0, 0])  # high for 40 ns
-
-    def clk_low(s):
-        _block(s, 300, [1, 1, 1, 1, 1, 1, 0, 0, 1, 1])  # low for 40 ns, period 260 ns
-
-    def hold_converting(s):
-        k = _first(s, "hold_c", 0) + 60
-        s[k]["hold_c"] = 0
-
-    def hold_in_reset(s):
-        k = _first(s, "hold_c", 0)
-        for j in range(k - 5, k + 3):
-            s[j]["reset"] = 0
-
-    def rd_short(s):
-        k = _first(s, "rd", 0)
-        for j in range(k + 1, k + 10):
-            s[j]["rd"] = 1
-
-    def addr_rd_low(s):
-        k = _first(s, "rd", 0) + 4
-        for j in range(k, k + 6):
-            s[j]["addr"] = 5
-
-    def addr_rd_rise(s):
-        k = _first(s, "rd", 1, after=_first(s, "rd", 0))
-        s[k]["addr"] = 5
-        s[k + 1]["addr"] = 5
-
-    def addr_setup(s):
-        k = _first(s, "rd", 0)
-        for j in range(k - 10, k):
-            s[j]["addr"] = 2
-
-    def wr_low(s):
-        s[100]["wr"] = 0
-
-    def addr_mode(s):
-        k = _first(s, "cs", 0)
-        for j in range(k, k + 22):
-            s[j]["addr"] = 6
-
-    return {f.__name__: f for f in (clk_period, clk_high, clk_low, hold_converting, hold_in_reset, rd_short,
-                                     addr_rd_low, addr_rd_rise, addr_setup, wr_low, addr_mode)}
+    """Each way to break the datasheet's timing: ``{name: edit of a legal script}``."""
+    return {f.__name__[1:]: f for f in (_clk_period, _clk_high, _clk_low, _hold_converting, _hold_in_reset, _rd_short,
+                                         _addr_rd_low, _addr_rd_rise, _addr_setup, _wr_low, _addr_mode)}
 
 
 EXPECTED_RULE = {"clk_period": 1, "clk_high": 3, "clk_low": 2, "hold_converting": 8, "hold_in_reset": 7,
