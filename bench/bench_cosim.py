@@ -42,41 +42,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     print(f"seed {SEED}")
     sims = [s for s in SIMULATORS if simulator_available(s)[0]]
-    rows = []
-    for variant, samples in (("steady", args.samples), ("full", max(args.samples // 10, 1000))):
-        for sim in sims:
-            r = run(build(sim, "core", variant=variant), "test_core", testcase="core_bit_exact",
-                    params={"variant": variant, "seed": SEED, "samples": samples}, tag="bench")
-            assert r["mismatches"] == 0
-            rows.append({"what": f"{variant} core alone", "simulator": sim, "samples": samples,
-                         "loop_samples_per_s": r["samples_per_s"], "test_samples_per_s": samples / r["wall_s"]})
-    config = FilterConfig()
-    for variant, samples in (("steady", args.samples * 4), ("full", max(args.samples * 4 // 10, 1000))):
-        for sim in sims:
-            n = samples if sim == "verilator" else samples // 10
-            words = [{"channel": 0, "y": int(c)} for c in stress_codes(SEED, n)]
-            t0 = time.perf_counter()
-            r = corerun.run(corerun.build(sim, config=config, variant=variant), words=words, seed=SEED, tag="bench")
-            assert r["mismatches"] == 0 and r["ok"]
-            rows.append({"what": f"{variant} core alone, source and sink in the simulator", "simulator": sim,
-                         "samples": n, "loop_samples_per_s": r["samples_per_s"],
-                         "test_samples_per_s": n / (time.perf_counter() - t0)})
-    for variant in ("steady", "full"):
-        for sim in sims:
-            # the Python ADC model is the slower: fewer estimates
-            n_py = max(args.system_samples // (10 if sim == "verilator" else 20), 100)
-            r = run(build(sim, "top", variant=variant), "test_top", testcase="system_bit_exact",
-                    params={"variant": variant, "seed": SEED, "samples": n_py}, tag="bench")
-            assert r["mismatches"] == 0
-            rows.append({"what": f"whole design, {variant}, 1 channel, Python ADC (cocotb)", "simulator": sim,
-                         "samples": r["samples"], "loop_samples_per_s": None,
-                         "test_samples_per_s": r["samples"] / r["wall_s"]})
-            n = args.system_samples if sim == "verilator" else max(args.system_samples // 10, 100)
-            r = system.run(system.build(sim, variant=variant), params={"seed": SEED}, samples=n, tag="bench")
-            assert r["mismatches"] == 0 and r["ok"]
-            rows.append({"what": f"whole design, {variant}, 1 channel, Verilog ADC (kfpga_cosim)", "simulator": sim,
-                         "samples": r["samples"], "loop_samples_per_s": r["samples_per_s"],
-                         "test_samples_per_s": r["samples"] / r["wall_total_s"]})
+    rows = _core_rows(sims, args.samples) + _system_rows(sims, args.system_samples)
     speedups = {}
     for variant in ("steady", "full"):
         for sim in sims:
@@ -105,6 +71,52 @@ def main(argv=None):
     for what, ratio in speedups.items():
         print(f"Verilog ADC / Python ADC, {what}: {ratio:.1f}x")
     return 0
+
+
+def _core_rows(sims, samples_arg):
+    """Each core alone: the cocotb bench, then the source and sink in the simulator."""
+    rows = []
+    for variant, samples in (("steady", samples_arg), ("full", max(samples_arg // 10, 1000))):
+        for sim in sims:
+            r = run(build(sim, "core", variant=variant), "test_core", testcase="core_bit_exact",
+                    params={"variant": variant, "seed": SEED, "samples": samples}, tag="bench")
+            assert r["mismatches"] == 0
+            rows.append({"what": f"{variant} core alone", "simulator": sim, "samples": samples,
+                         "loop_samples_per_s": r["samples_per_s"], "test_samples_per_s": samples / r["wall_s"]})
+    config = FilterConfig()
+    for variant, samples in (("steady", samples_arg * 4), ("full", max(samples_arg * 4 // 10, 1000))):
+        for sim in sims:
+            n = samples if sim == "verilator" else samples // 10
+            words = [{"channel": 0, "y": int(c)} for c in stress_codes(SEED, n)]
+            t0 = time.perf_counter()
+            r = corerun.run(corerun.build(sim, config=config, variant=variant), words=words, seed=SEED, tag="bench")
+            assert r["mismatches"] == 0 and r["ok"]
+            rows.append({"what": f"{variant} core alone, source and sink in the simulator", "simulator": sim,
+                         "samples": n, "loop_samples_per_s": r["samples_per_s"],
+                         "test_samples_per_s": n / (time.perf_counter() - t0)})
+    return rows
+
+
+def _system_rows(sims, system_samples):
+    """The whole design: the Python ADC model (cocotb), then the Verilog one (kfpga_cosim)."""
+    rows = []
+    for variant in ("steady", "full"):
+        for sim in sims:
+            # the Python ADC model is the slower: fewer estimates
+            n_py = max(system_samples // (10 if sim == "verilator" else 20), 100)
+            r = run(build(sim, "top", variant=variant), "test_top", testcase="system_bit_exact",
+                    params={"variant": variant, "seed": SEED, "samples": n_py}, tag="bench")
+            assert r["mismatches"] == 0
+            rows.append({"what": f"whole design, {variant}, 1 channel, Python ADC (cocotb)", "simulator": sim,
+                         "samples": r["samples"], "loop_samples_per_s": None,
+                         "test_samples_per_s": r["samples"] / r["wall_s"]})
+            n = system_samples if sim == "verilator" else max(system_samples // 10, 100)
+            r = system.run(system.build(sim, variant=variant), params={"seed": SEED}, samples=n, tag="bench")
+            assert r["mismatches"] == 0 and r["ok"]
+            rows.append({"what": f"whole design, {variant}, 1 channel, Verilog ADC (kfpga_cosim)", "simulator": sim,
+                         "samples": r["samples"], "loop_samples_per_s": r["samples_per_s"],
+                         "test_samples_per_s": r["samples"] / r["wall_total_s"]})
+    return rows
 
 
 if __name__ == "__main__":
