@@ -304,12 +304,8 @@ def write_core_testbench(out_dir, config, *, variant, prefix, channels=1, archit
     return {"samples": samples, "seed": seed, "scenario": scenario, "files": files, "out_width": ow, "in_width": iw}
 
 
-def _tb_verilog(prefix, iw, ow, samples, max_cycles, seed, o_fields):
-    tb = f"{prefix}_tb"
-    show = " ".join(f"{name} %0d" for name, *_ in o_fields)
-    args = ", ".join(f"{'$signed(' if s else ''}{w}[{o + n - 1}:{o}]{')' if s else ''}"
-                     for w in ("o_payload", "want") for _, o, n, s in o_fields)
-    return f"""// Self-checking testbench of the core {prefix} alone: samples from {prefix}_stimulus.hex with random
+#: The core's testbench, a ``str.format`` template (``{{`` and ``}}`` are Verilog's braces).
+_TB_VERILOG = """// Self-checking testbench of the core {prefix} alone: samples from {prefix}_stimulus.hex with random
 // gaps, a receiver whose ready an LFSR drops on about 30 % of the cycles, every estimate
 // compared with {prefix}_expected.hex (the bit-accurate model). Plain Verilog-2001, written by kfpga.
 // Ends with one PASS or FAIL line and an exit status.
@@ -318,8 +314,8 @@ def _tb_verilog(prefix, iw, ow, samples, max_cycles, seed, o_fields):
 module {tb};
     parameter integer SAMPLES = {samples};
     parameter integer MAX_CYCLES = {max_cycles};
-    parameter [31:0] SEED = 32'd{(seed * 2654435761 + 1) & 0xFFFFFFFF | 1};
-    parameter integer READY_PER_1024 = {READY_PER_1024};
+    parameter [31:0] SEED = 32'd{seed_word};
+    parameter integer READY_PER_1024 = {ready_per_1024};
     // 0: inside a larger testbench, which waits for done and reads failed (no $finish here)
     parameter integer STANDALONE = 1;
 
@@ -327,19 +323,19 @@ module {tb};
     always #10 clk = ~clk;
     reg rst = 1'b1;
     reg i_valid = 1'b0;
-    reg [{iw - 1}:0] i_payload = {iw}'d0;
+    reg [{iw_top}:0] i_payload = {iw}'d0;
     wire i_ready, o_valid, overflow;
     reg o_ready = 1'b0;
-    wire [{ow - 1}:0] o_payload;
+    wire [{ow_top}:0] o_payload;
 
     {prefix} dut (
         .clk(clk), .rst(rst), .i__valid(i_valid), .i__ready(i_ready), .i__payload(i_payload),
         .o__valid(o_valid), .o__ready(o_ready), .o__payload(o_payload), .overflow(overflow)
     );
 
-    // {prefix}_stimulus.hex: {{idle cycles before the sample [7:0], the payload [{iw - 1}:0]}}
-    reg [{iw + 7}:0] stimulus [0:SAMPLES - 1];
-    reg [{ow - 1}:0] expected [0:SAMPLES - 1];
+    // {prefix}_stimulus.hex: {{idle cycles before the sample [7:0], the payload [{iw_top}:0]}}
+    reg [{gap_top}:0] stimulus [0:SAMPLES - 1];
+    reg [{ow_top}:0] expected [0:SAMPLES - 1];
     initial begin
         $readmemh("{prefix}_stimulus.hex", stimulus);
         $readmemh("{prefix}_expected.hex", expected);
@@ -348,7 +344,7 @@ module {tb};
     integer sent = 0, got = 0, mismatches = 0, extra = 0, cycles = 0, idle = 0, after = 0;
     reg failed = 1'b0, done = 1'b0;
     reg [31:0] lfsr = SEED;
-    wire [{ow - 1}:0] want = expected[got < SAMPLES ? got : 0];
+    wire [{ow_top}:0] want = expected[got < SAMPLES ? got : 0];
 
     task finish;
         begin
@@ -360,7 +356,7 @@ module {tb};
                 $display("PASS: {prefix}: %0d estimates equal to the model, one per sample", got);
             done = 1'b1;
             if (STANDALONE != 0) begin
-{finish_with_status("                ")}
+{finish}
             end
         end
     endtask
@@ -389,15 +385,15 @@ module {tb};
             // the sender: the next sample after its idle cycles, held until taken
             if (i_valid && i_ready) begin
                 sent = sent + 1;
-                if (sent < SAMPLES && stimulus[sent][{iw + 7}:{iw}] == 0)
-                    i_payload <= stimulus[sent][{iw - 1}:0];
+                if (sent < SAMPLES && stimulus[sent][{gap_top}:{iw}] == 0)
+                    i_payload <= stimulus[sent][{iw_top}:0];
                 else begin
                     i_valid <= 1'b0;
-                    idle = (sent < SAMPLES) ? stimulus[sent][{iw + 7}:{iw}] - 1 : 0;
+                    idle = (sent < SAMPLES) ? stimulus[sent][{gap_top}:{iw}] - 1 : 0;
                 end
             end else if (!i_valid && sent < SAMPLES) begin
                 if (idle <= 0) begin
-                    i_payload <= stimulus[sent][{iw - 1}:0];
+                    i_payload <= stimulus[sent][{iw_top}:0];
                     i_valid <= 1'b1;
                 end else
                     idle = idle - 1;
@@ -409,6 +405,17 @@ module {tb};
 endmodule
 `default_nettype wire
 """
+
+
+def _tb_verilog(prefix, iw, ow, samples, max_cycles, seed, o_fields):
+    tb = f"{prefix}_tb"
+    show = " ".join(f"{name} %0d" for name, *_ in o_fields)
+    args = ", ".join(f"{'$signed(' if s else ''}{w}[{o + n - 1}:{o}]{')' if s else ''}"
+                     for w in ("o_payload", "want") for _, o, n, s in o_fields)
+    return _TB_VERILOG.format(prefix=prefix, tb=tb, samples=samples, max_cycles=max_cycles,
+                              seed_word=(seed * 2654435761 + 1) & 0xFFFFFFFF | 1, ready_per_1024=READY_PER_1024,
+                              iw_top=iw - 1, iw=iw, ow_top=ow - 1, gap_top=iw + 7,
+                              finish=finish_with_status("                "), show=show, args=args)
 
 
 def fusesoc_core(*, vlnv, comments, description, rtl, top, tb, tb_top, data, filesets="", targets=""):

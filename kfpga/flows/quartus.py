@@ -270,6 +270,16 @@ def write_project(out_dir, config, *, variant=None, six_channel=False, channel=N
     (out_dir / f"{TOP_NAME}.qpf").write_text(
         f'# Quartus II project (kfpga {__version__})\nQUARTUS_VERSION = "13.0"\nPROJECT_REVISION = "{TOP_NAME}"\n')
 
+    manifest = _manifest(config, variant, top, verilog, assigned, ports, out_field, data_bits, values,
+                         six_channel=six_channel, sensors=sensors, ratio=ratio, prefilter=prefilter, timing=timing)
+    (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
+    (out_dir / "README.txt").write_text(_readme(variant, six_channel, ratio, manifest))
+    return manifest
+
+
+def _manifest(config, variant, top, verilog, assigned, ports, out_field, data_bits, values, *, six_channel, sensors,
+              ratio, prefilter, timing):
+    """The project's ``manifest.json``: what was generated, from what, with which formats, ports and pins."""
     core = top.core
     manifest = {
         "generator": {"kfpga": __version__, "amaranth": importlib.metadata.version("amaranth")},
@@ -306,8 +316,6 @@ def write_project(out_dir, config, *, variant=None, six_channel=False, channel=N
     manifest["constants"] = {name: {"value": c.value, "raw": raws[name],
                                     "format": str(config.formats[c.point] if isinstance(c.point, str) else c.point)}
                              for name, c in config.constants(variant).items() if isinstance(c, Constant)}
-    (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
-    (out_dir / "README.txt").write_text(_readme(variant, six_channel, ratio, manifest))
     return manifest
 
 
