@@ -117,3 +117,25 @@ def test_a_line_run_at_import_gets_the_tests_of_its_file():
     table = Mutant("hw/a.py", 2, "const+-1", "3", "4", (2, 8), (2, 9))
     assert tests_of(covered, inside) == {"t1"}
     assert tests_of(covered, table) == {"t1", "t2"}  # no test runs line 2: its file's tests
+
+
+def test_a_verdict_is_kept_while_its_file_is_unchanged(block, tmp_path, monkeypatch):
+    """An interrupted run resumes: the verdicts written as they are measured are read back for
+    the same change of the same source, and not once the file changes."""
+    import json
+    from dataclasses import asdict
+
+    from kfpga.verify import srcmutate
+
+    monkeypatch.setattr(srcmutate, "ROOT", tmp_path / "out")
+    (tmp_path / "out").mkdir()
+    first = mutants_of(block.name, 2, 1, root=block.parent)
+    first[0].result, first[0].by, first[0].seconds = "killed", "tests/x.py::test_y", 12.5
+    lines = [json.dumps(asdict(first[0])), '{"cut short']
+    (tmp_path / "out" / srcmutate.VERDICTS).write_text("\n".join(lines) + "\n")
+    kept = srcmutate._verdicts()
+    again = mutants_of(block.name, 2, 1, root=block.parent)
+    assert again[0].key in kept and kept[again[0].key]["result"] == "killed"
+    assert again[1].key not in kept
+    block.write_text(SOURCE.replace("width=4", "width=5"))
+    assert all(m.key not in kept for m in mutants_of(block.name, 2, 1, root=block.parent))

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import hashlib
 import json
 import os
 import random
@@ -80,6 +81,13 @@ class Mutant:
     result: str = ""
     by: str = ""
     tests: int = 0
+    seconds: float = 0.0
+    digest: str = ""  # of the file's source the mutant was drawn from
+
+    @property
+    def key(self):
+        """What identifies the mutant's verdict: its file's source and the change."""
+        return f"{self.file}|{self.digest}|{self.start}|{self.end}|{self.operator}|{self.after}"
 
 
 def _functions(tree):
@@ -196,6 +204,7 @@ def mutants_of(path, count, rng, root=Path(".")):
     if not source.isascii():
         raise ValueError(f"{path}: the mutation offsets assume ASCII source")
     candidates = sites(root / path, source)
+    digest = hashlib.sha256(source.encode()).hexdigest()[:16]
     rng.shuffle(candidates)
     out = []
     for operator, node, text in candidates:
@@ -210,7 +219,7 @@ def mutants_of(path, count, rng, root=Path(".")):
             continue
         before = ast.get_source_segment(source, node)
         out.append(Mutant(str(path), node.lineno, operator, before, text, (node.lineno, node.col_offset),
-                          (node.end_lineno, node.end_col_offset)))
+                          (node.end_lineno, node.end_col_offset), digest=digest))
     return out
 
 
@@ -281,8 +290,6 @@ def _env(tree):
 
 
 def _tree_digest(tree, pool):
-    import hashlib
-
     h = hashlib.sha256()
     for path in sorted((tree / "hw").glob("*.py")) + [tree / p for p in pool]:
         h.update(path.read_bytes())
@@ -448,6 +455,26 @@ def run_mutant(mutant, tree, tests, original, progress):
         path.write_text(source)
 
 
+#: Every verdict measured, one JSON line a mutant, appended as it is measured.
+VERDICTS = "verdicts.jsonl"
+
+
+def _verdicts():
+    """``{mutant key: fields}`` of the verdicts measured before (the last of each key)."""
+    path = ROOT / VERDICTS
+    if not path.exists():
+        return {}
+    out = {}
+    for line in path.read_text().splitlines():
+        try:
+            fields = json.loads(line)
+        except json.JSONDecodeError:
+            continue  # a line cut short by an interrupted run
+        fields["start"], fields["end"] = tuple(fields["start"]), tuple(fields["end"])
+        out[Mutant(**fields).key] = fields
+    return out
+
+
 def summary(mutants):
     rows = {}
     for m in mutants:
@@ -468,7 +495,7 @@ def table(rows):
     return "\n".join(lines)
 
 
-def main(argv=None):
+def _parser():
     parser = argparse.ArgumentParser(
         prog="python -m kfpga.verify.srcmutate",
         description="Source-level mutation of hw/: seeded mutants of the RTL-building Python (operators, constants, "
@@ -482,6 +509,14 @@ def main(argv=None):
     parser.add_argument("--tests", nargs="+", metavar="FILE", default=POOL,
                         help="the test files that map lines to tests (default: the Amaranth-simulator tests of hw/)")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    parser.add_argument("--fresh", action="store_true",
+                        help="run every mutant again (by default a mutant of an unchanged file keeps its verdict from "
+                             f"{ROOT / VERDICTS}, so an interrupted run resumes)")
+    return parser
+
+
+def main(argv=None):
+    parser = _parser()
     args = parser.parse_args(argv)
     if args.mutants < 1:
         parser.exit(2, f"{parser.prog}: error: --mutants must be >= 1, not {args.mutants}\n")
@@ -495,30 +530,12 @@ def main(argv=None):
     files = [f for f in files if not wanted or any(t in f.lower() for t in wanted)]
     if not files:
         parser.exit(2, f"{parser.prog}: error: no file of hw/ matches --only {args.only!r}\n")
-
-    def say(text):
-        print(text, file=sys.stderr, flush=True)
-
-    say(f"seed {args.seed} (replay with --seed {args.seed}), {args.mutants} mutants per file, {len(files)} files")
     t0 = time.perf_counter()
-    ROOT.mkdir(parents=True, exist_ok=True)
-    tree = copy_tree(here, ROOT / "tree")
-    chosen = [m for f in files for m in mutants_of(f, args.mutants, args.seed, root=tree)]
-    covered = line_tests(tree, say, args.tests)
-    say("elaborating every design from the original source ...")
-    original, why = elaborate(tree, ROOT / "original")
-    if original is None:
-        raise SystemExit(f"the original source does not elaborate: {why}")
-    done = []
-    for k, mutant in enumerate(chosen, 1):
-        tests = tests_of(covered, mutant)
-        run_mutant(mutant, tree, tests, ROOT / "original", say)
-        done.append(mutant)
-        say(f"[{k}/{len(chosen)}] {mutant.file}:{mutant.line} {mutant.operator} `{mutant.before}` -> `{mutant.after}`: "
-            f"{mutant.result} ({mutant.by}; {mutant.tests} test(s) run the line)")
+    done = _run(args, here, files)
     rows = summary(done)
     report = {"seed": args.seed, "mutants_per_file": args.mutants, "seconds": round(time.perf_counter() - t0),
-              "summary": rows, "mutants": [asdict(m) for m in done]}
+              "measured_seconds": round(sum(m.seconds for m in done)), "summary": rows,
+              "mutants": [asdict(m) for m in done]}
     (ROOT / "report.json").write_text(json.dumps(report, indent=2))
     if args.json:
         print(json.dumps(report, indent=2))
@@ -527,8 +544,44 @@ def main(argv=None):
         survivors = [m for m in done if m.result == "survived"]
         for m in survivors:
             print(f"survived: {m.file}:{m.line} {m.operator} `{m.before}` -> `{m.after}` ({m.by})")
-        print(f"\n{report['seconds']} s; every mutant and its fate: {ROOT / 'report.json'}")
+        print(f"\n{report['seconds']} s this run, {report['measured_seconds']} s of mutant runs in all; every mutant "
+              f"and its fate: {ROOT / 'report.json'}")
     return 0 if all(r["score"] >= 0.95 for r in rows) else 1
+
+
+def _say(text):
+    print(text, file=sys.stderr, flush=True)
+
+
+def _run(args, here, files):
+    """Every mutant of ``files`` drawn, run (or its verdict kept), in order."""
+    _say(f"seed {args.seed} (replay with --seed {args.seed}), {args.mutants} mutants per file, {len(files)} files")
+    ROOT.mkdir(parents=True, exist_ok=True)
+    tree = copy_tree(here, ROOT / "tree")
+    chosen = [m for f in files for m in mutants_of(f, args.mutants, args.seed, root=tree)]
+    kept = {} if args.fresh else _verdicts()
+    # every verdict kept: no coverage pass needed
+    covered = {} if all(m.key in kept for m in chosen) else line_tests(tree, _say, args.tests)
+    _say("elaborating every design from the original source ...")
+    original, why = elaborate(tree, ROOT / "original")
+    if original is None:
+        raise SystemExit(f"the original source does not elaborate: {why}")
+    done = []
+    for k, mutant in enumerate(chosen, 1):
+        if mutant.key in kept:
+            mutant = Mutant(**kept[mutant.key])
+            note = "kept from an earlier run: its file is unchanged"
+        else:
+            t1 = time.perf_counter()
+            run_mutant(mutant, tree, tests_of(covered, mutant), ROOT / "original", _say)
+            mutant.seconds = round(time.perf_counter() - t1, 1)
+            with (ROOT / VERDICTS).open("a") as f:  # at once: an interrupted run keeps what it measured
+                f.write(json.dumps(asdict(mutant)) + "\n")
+            note = f"{mutant.seconds:.0f} s"
+        done.append(mutant)
+        _say(f"[{k}/{len(chosen)}] {mutant.file}:{mutant.line} {mutant.operator} `{mutant.before}` -> `{mutant.after}`: "
+             f"{mutant.result} ({mutant.by}; {mutant.tests} test(s) run the line; {note})")
+    return done
 
 
 if __name__ == "__main__":
