@@ -4,6 +4,7 @@ outside the package gets every generic command, ``kfpga evaluate`` and the contr
 * No package file outside a filter's own (``model/NAME.py``, ``hw/NAME.py``, ``model/evaluations/NAME.py``,
   any ``NAME_*.py``) and the registry names the filter or imports its modules: identifiers,
   imports and strings (docstrings and comments may mention it).
+* Its tests are ``tests/test_model_NAME.py`` and ``tests/test_hw_NAME.py``.
 * A toy filter (a one-state exponential smoother), defined and registered in this file, runs
   through the commands and the contract checks with no package file edited.
 """
@@ -76,6 +77,16 @@ def test_a_filter_is_named_only_in_its_own_files_and_the_registry(name):
             if names & set(words):
                 found.append(f"{path.relative_to(ROOT)}:{line}")
     assert found == [], f"the {name} filter is named outside its own files: {found}"
+
+
+@pytest.mark.parametrize("name", registry.names())
+def test_a_filters_tests_are_named_by_layer(name):
+    """``tests/test_model_NAME.py`` for its model and ``tests/test_hw_NAME.py`` for its cores, the
+    stem of ``model/NAME.py``; no other test file is named after the filter alone."""
+    tests = ROOT / "tests"
+    assert (tests / f"test_model_{name}.py").is_file() and (tests / f"test_hw_{name}.py").is_file()
+    assert (ROOT / "model" / f"{name}.py").is_file()
+    assert not (tests / f"test_{name}.py").exists()
 
 
 def test_the_check_finds_a_name():

@@ -56,7 +56,7 @@ ROOT = Path("build") / "mutate" / "source"
 #: The tests whose coverage says which test runs which line (the fast, Amaranth-simulator ones).
 POOL = ["tests/contract/test_streams.py", "tests/contract/test_contract.py", "tests/test_hw_kalman.py",
         "tests/test_hw_kalman2.py", "tests/test_hw_divider.py", "tests/test_hw_top.py", "tests/test_hw_clockdiv.py",
-        "tests/test_hw_ads8364.py", "tests/test_sequencer.py", "tests/test_alphabeta.py", "tests/test_tukey53h.py",
+        "tests/test_hw_ads8364.py", "tests/test_hw_sequencer.py", "tests/test_hw_alphabeta.py", "tests/test_hw_tukey53h.py",
         "tests/test_sensors.py", "tests/test_hw_generate.py"]
 #: What the first pass leaves out: the co-simulations (their lines are run by the Amaranth tests too).
 POOL_MARKS = "not cosim and not slow"

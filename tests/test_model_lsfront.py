@@ -1,5 +1,6 @@
-"""The least-squares front end of seeds/003, in float: the running sums against numpy's fit on
-every window, the window table, the m = 1 start, and the evaluation."""
+"""The least-squares front end of seeds/003: the running sums against numpy's fit on every
+window, the window table, the m = 1 start, the evaluation, and the bit-accurate front end
+against its float form (its core: tests/test_hw_lsfront.py)."""
 
 import json
 import math
@@ -9,8 +10,6 @@ import pytest
 
 from kfpga.cli import main
 from kfpga.model import lsfront as ls
-from kfpga.sim.runner import SIMULATORS
-from tests.helpers.simulators import core_is_bit_exact_on
 
 
 @pytest.mark.parametrize("n", [3, 5, 12, 30])
@@ -75,9 +74,6 @@ def test_evaluate_ls_frontend_cli(tmp_path, capsys, seed):
     # the baseline at equal noise suppression: its q found by bisection matches x0's RMSE at constant speed
     assert equal["rmse_cruise"] == pytest.approx(fed["rmse_cruise"], rel=1e-3)
     assert sum(result["windows"].values()) == result["scenario"]["seconds"] and len(result["claims"]) == 6
-
-
-# -- the bit-accurate front end --------------------------------------------------------------------
 
 
 def _fixed(params=None, **formats):
@@ -172,8 +168,11 @@ def test_switched_filter_settles_onto_the_time_varying_one(seed):
 
 
 def test_bit_accurate_front_end_follows_its_float_form(seed):
-    """The model's integers against the switched filter in float: far within the speed log's
-    noise, the same window nearly everywhere, no overflow on a ship's speeds."""
+    """The model's integers against the switched filter in float: the same window nearly
+    everywhere, no overflow on a ship's speeds, and far within the speed log's noise except
+    after the two choose different windows (an innovation at a threshold): the filters then
+    differ by what the windows differ (up to about 120 codes on 13 seeds), which fades out within
+    60 samples (2 codes at most after that, on the same seeds)."""
     from kfpga.core.fixedmodel import FixedModel
 
     rng = np.random.default_rng(seed)
@@ -184,28 +183,15 @@ def test_bit_accurate_front_end_follows_its_float_form(seed):
     ref = ls.switched(codes, params)
     velocity = run.outputs["velocity"] * config.formats["x1"].lsb
     assert not run.overflow.any()
-    assert np.max(np.abs(velocity - ref["velocity"])) < 5.0  # codes (mm/s), against a noise of 100
-    assert np.mean(run.outputs["ns"] == ref["ns"]) > 0.99
+    same = run.outputs["ns"] == ref["ns"]
+    assert np.mean(same) > 0.99
+    apart = np.abs(velocity - ref["velocity"])  # codes (mm/s), against a noise of 100
+    last_choice_apart = np.maximum.accumulate(np.where(same, -(10 ** 9), np.arange(len(same))))
+    settled = np.arange(len(same)) - last_choice_apart > 60
+    assert settled.mean() > 0.5 and np.max(apart[settled]) < 5.0
+    assert np.median(apart) < 1.0
 
 
 def test_window_longer_than_the_limit_is_refused():
     with pytest.raises(ValueError, match=f"Ns must be at most {ls.MAX_WINDOW}"):
         ls.LSFrontParams(table=((math.inf, ls.MAX_WINDOW + 1),))
-
-
-@pytest.mark.cosim
-@pytest.mark.parametrize("simulator", SIMULATORS)
-def test_core_is_bit_exact_through_a_deceleration(simulator, seed):
-    """The generated Verilog of the front end and its filter on the patent's scenario (400 s: the
-    cruise, the deceleration, the stop), with random valid/ready: the raw velocity at the start
-    (m = 1) and every window of the table are used, and every output is the model's."""
-    from kfpga.core.fixedmodel import FixedModel
-    from kfpga.model.evaluations.lsfront import DecelerationScenario, deceleration_log
-    from kfpga.model.scenarios import adc_codes
-
-    config = _fixed()
-    _, _, v, _ = deceleration_log(DecelerationScenario(seconds=400), seed)
-    codes = adc_codes(v / config.params.lsb)
-    used = set(FixedModel(config).run(codes).outputs["ns"].tolist())
-    assert used == {0, *config.params.windows}, used
-    core_is_bit_exact_on(simulator, config, "steady", codes, seed, "lsfront-deceleration")

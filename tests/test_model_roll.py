@@ -1,6 +1,6 @@
 """The ship-roll interval predictor of seeds/000: in float, its forms against each other and
 against an independent Kalman filter, the paper's data, the evaluation and its bad input; in
-fixed point, against float, its word lengths, and its core in cocotb."""
+fixed point, against float and its word lengths (its core: tests/test_hw_roll.py)."""
 
 import json
 
@@ -9,8 +9,6 @@ import pytest
 
 from kfpga.cli import main
 from kfpga.model import roll
-from kfpga.sim.runner import SIMULATORS
-from tests.helpers.simulators import core_is_bit_exact_on
 
 
 def test_table1_is_the_papers():
@@ -140,8 +138,6 @@ def test_read_series_header_is_optional(tmp_path):
     assert read_series(path, column="column 1").tolist() == [0.0, 0.5]
 
 
-# -- the bit-accurate predictor (the registered filter "roll") -----------------------------------------------
-
 def _float_run(variant, z, params):
     """The variant's stage functions in float64 (FloatOps), one filter, from its reset state."""
     from kfpga.core.config import FilterConfig
@@ -202,25 +198,3 @@ def test_positive_definiteness_checks():
     identity = {"p11": 1, "p22": 1, "p33": 1, "p12": 0, "p13": 0, "p23": 0}
     assert roll.covariance_ok("plain", identity)
     assert not roll.covariance_ok("plain", {**identity, "p12": 2})  # eigenvalues 3, -1, 1
-
-
-@pytest.mark.cosim
-@pytest.mark.parametrize("simulator", SIMULATORS)
-def test_core_is_the_interval_predictor_in_cocotb(simulator, seed):
-    """The generated Verilog of the roll core on a roll series (the paper's table 1, then a
-    synthetic series), with random valid/ready: every output is the model's, which is the
-    combined interval predictor's prediction of the sample 2 ahead (``predict_fixed``)."""
-    from kfpga.core.config import FilterConfig
-    from kfpga.core.fixedmodel import FixedModel
-    from kfpga.model.scenarios import adc_codes
-
-    config = FilterConfig(filter="roll")
-    _, table = roll.table1()
-    _, synthetic, _ = roll.synthetic_roll(90, seed)
-    z = np.r_[table, synthetic]
-    codes = adc_codes(z / config.params.lsb)
-    pred, overflowed, _ = roll.predict_fixed(z, config)
-    model = FixedModel(config).run(codes)
-    np.testing.assert_array_equal(model.outputs["pred"] * config.formats["x1"].lsb * config.params.lsb, pred)
-    assert overflowed == 0
-    core_is_bit_exact_on(simulator, config, "sqrt", codes, seed, "roll-series")
