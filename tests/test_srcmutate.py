@@ -139,3 +139,17 @@ def test_a_verdict_is_kept_while_its_file_is_unchanged(block, tmp_path, monkeypa
     assert again[1].key not in kept
     block.write_text(SOURCE.replace("width=4", "width=5"))
     assert all(m.key not in kept for m in mutants_of(block.name, 2, 1, root=block.parent))
+
+
+def test_the_per_file_table():
+    from kfpga.verify.srcmutate import Mutant, markdown, summary
+
+    done = [Mutant("hw/a.py", 1, "+/-", "a", "b", (1, 0), (1, 1), result=r, seconds=60.0)
+            for r in ("killed", "killed", "equivalent")]
+    done.append(Mutant("hw/b.py", 2, "drop", "x", "pass", (2, 0), (2, 1), result="survived", seconds=30.0))
+    rows = summary(done)
+    assert [(r["file"], r["killed"], r["equivalent"], r["survived"], r["score"]) for r in rows] == [
+        ("hw/a.py", 2, 1, 0, 1.0), ("hw/b.py", 0, 0, 1, 0.0)]
+    text = markdown(rows).splitlines()
+    assert text[2] == "| `hw/a.py` | 3 | 2 | 1 | 0 | 100 % | 3.0 |"
+    assert text[3] == "| `hw/b.py` | 1 | 0 | 0 | 1 | 0 % | 0.5 |"

@@ -478,9 +478,11 @@ def _verdicts():
 def summary(mutants):
     rows = {}
     for m in mutants:
-        r = rows.setdefault(m.file, {"file": m.file, "mutants": 0, "killed": 0, "equivalent": 0, "survived": 0})
+        r = rows.setdefault(m.file, {"file": m.file, "mutants": 0, "killed": 0, "equivalent": 0, "survived": 0,
+                                     "seconds": 0.0})
         r["mutants"] += 1
         r[m.result] += 1
+        r["seconds"] += m.seconds
     for r in rows.values():
         scored = r["mutants"] - r["equivalent"]
         r["score"] = r["killed"] / scored if scored else 1.0
@@ -492,6 +494,15 @@ def table(rows):
     for r in rows:
         lines.append(f"{r['file']:<24} {r['mutants']:>7} {r['killed']:>6} {r['equivalent']:>5} {r['survived']:>8} "
                      f"{100 * r['score']:>6.1f}%")
+    return "\n".join(lines)
+
+
+def markdown(rows):
+    """The per-file table as Markdown (the manual's table)."""
+    lines = ["| file | mutants | killed | equivalent | survived | score | minutes |",
+             "| --- | --- | --- | --- | --- | --- | --- |"]
+    lines += [f"| `{r['file']}` | {r['mutants']} | {r['killed']} | {r['equivalent']} | {r['survived']} | "
+              f"{100 * r['score']:.0f} % | {r['seconds'] / 60:.1f} |" for r in rows]
     return "\n".join(lines)
 
 
@@ -509,6 +520,7 @@ def _parser():
     parser.add_argument("--tests", nargs="+", metavar="FILE", default=POOL,
                         help="the test files that map lines to tests (default: the Amaranth-simulator tests of hw/)")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    parser.add_argument("--markdown", action="store_true", help="print the per-file table as Markdown")
     parser.add_argument("--fresh", action="store_true",
                         help="run every mutant again (by default a mutant of an unchanged file keeps its verdict from "
                              f"{ROOT / VERDICTS}, so an interrupted run resumes)")
@@ -539,6 +551,8 @@ def main(argv=None):
     (ROOT / "report.json").write_text(json.dumps(report, indent=2))
     if args.json:
         print(json.dumps(report, indent=2))
+    elif args.markdown:
+        print(markdown(rows))
     else:
         print(table(rows))
         survivors = [m for m in done if m.result == "survived"]
