@@ -153,3 +153,12 @@ def test_the_per_file_table():
     text = markdown(rows).splitlines()
     assert text[2] == "| `hw/a.py` | 3 | 2 | 1 | 0 | 100 % | 3.0 |"
     assert text[3] == "| `hw/b.py` | 1 | 0 | 0 | 1 | 0 % | 0.5 |"
+
+
+def test_only_a_kill_outlives_a_change_of_the_tests():
+    from kfpga.verify.srcmutate import kept_verdicts
+
+    verdicts = {"a": {"result": "killed", "context": "old"}, "b": {"result": "equivalent", "context": "old"},
+                "c": {"result": "survived", "context": "new"}, "d": {"result": "equivalent"}}
+    assert set(kept_verdicts(verdicts, "new")) == {"a", "c"}
+    assert set(kept_verdicts(verdicts, "old")) == {"a", "b"}

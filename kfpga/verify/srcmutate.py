@@ -83,6 +83,7 @@ class Mutant:
     tests: int = 0
     seconds: float = 0.0
     digest: str = ""  # of the file's source the mutant was drawn from
+    context: str = ""  # of what else decides a verdict other than killed: the map's tests, the designs built
 
     @property
     def key(self):
@@ -289,6 +290,14 @@ def _env(tree):
     return {**os.environ, "PYTHONPATH": f"{tree}{os.pathsep}{tree / 'tests'}", "PYTHONDONTWRITEBYTECODE": "1"}
 
 
+def _context(tree, pool):
+    """The digest of the test files that map lines to tests and of the designs the tool builds."""
+    h = hashlib.sha256(ELABORATE.encode())
+    for path in sorted(tree / p for p in pool):
+        h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
 def _tree_digest(tree, pool):
     h = hashlib.sha256()
     for path in sorted((tree / "hw").glob("*.py")) + [tree / p for p in pool]:
@@ -399,7 +408,7 @@ def equivalence(original, mutant_dir, folder):
     differ = [p.name for p in sorted(original.glob("*.il"))
               if not (mutant_dir / p.name).exists() or (mutant_dir / p.name).read_text() != p.read_text()]
     if not differ:
-        return True, "no design the tests build changes"
+        return True, "no design of the tool's set changes"
     for name in differ:
         gate = mutant_dir / name
         proven, why = _equal(original / name, gate, folder / name[:-3])
@@ -473,6 +482,12 @@ def _verdicts():
         fields["start"], fields["end"] = tuple(fields["start"]), tuple(fields["end"])
         out[Mutant(**fields).key] = fields
     return out
+
+
+def kept_verdicts(verdicts, context):
+    """The verdicts an unchanged file's mutants keep: killed, or measured in the same ``context``."""
+    return {key: fields for key, fields in verdicts.items()
+            if fields["result"] == "killed" or fields.get("context") == context}
 
 
 def summary(mutants):
@@ -573,7 +588,10 @@ def _run(args, here, files):
     ROOT.mkdir(parents=True, exist_ok=True)
     tree = copy_tree(here, ROOT / "tree")
     chosen = [m for f in files for m in mutants_of(f, args.mutants, args.seed, root=tree)]
-    kept = {} if args.fresh else _verdicts()
+    context = _context(tree, args.tests)
+    # a killed mutant stays killed while its file is unchanged; any other verdict also needs the
+    # same tests and the same designs (a new test may kill it)
+    kept = {} if args.fresh else kept_verdicts(_verdicts(), context)
     # every verdict kept: no coverage pass needed
     covered = {} if all(m.key in kept for m in chosen) else line_tests(tree, _say, args.tests)
     _say("elaborating every design from the original source ...")
@@ -588,7 +606,7 @@ def _run(args, here, files):
         else:
             t1 = time.perf_counter()
             run_mutant(mutant, tree, tests_of(covered, mutant), ROOT / "original", _say)
-            mutant.seconds = round(time.perf_counter() - t1, 1)
+            mutant.seconds, mutant.context = round(time.perf_counter() - t1, 1), context
             with (ROOT / VERDICTS).open("a") as f:  # at once: an interrupted run keeps what it measured
                 f.write(json.dumps(asdict(mutant)) + "\n")
             note = f"{mutant.seconds:.0f} s"
