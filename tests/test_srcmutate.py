@@ -106,7 +106,7 @@ def test_a_design_that_no_longer_elaborates_kills_the_mutant(tmp_path):
     assert broken(original, mutant) == "b"
     (mutant / "b.il").write_text("module b\n")
     assert broken(original, mutant) is None
-    assert equivalence(original, mutant, tmp_path / "eq") == (True, "no design the tests build changes")
+    assert equivalence(original, mutant, tmp_path / "eq") == (True, "no design of the tool's set changes")
 
 
 def test_a_line_run_at_import_gets_the_tests_of_its_file():
