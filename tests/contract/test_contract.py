@@ -21,6 +21,7 @@ samples in the simulations: as many as :data:`CYCLE_BUDGET` cycles take, at leas
 
 import contextlib
 import dataclasses
+import importlib
 import os
 
 import numpy as np
@@ -146,6 +147,30 @@ def test_rtl_equals_model_with_backpressure(name, variant, architecture, channel
     report = run_core(config, variant, codes(rng, n), seed=seed, channels=channels, p_idle=0.3, p_ready=0.5,
                       options={"architecture": architecture})
     assert report["compared"] == n and report["extra"] == 0
+
+
+@pytest.mark.parametrize("name", registry.names())
+def test_a_core_refuses_a_variant_its_filter_does_not_have(name):
+    """Every core, whatever builds it, refuses with the config's own message: never a KeyError
+    from deep inside, never a core half built."""
+    from kfpga.hw.sequencer import SequentialCore
+
+    spec = registry.get(name)
+    config = FilterConfig(filter=name)
+    with pytest.raises(ConfigError) as refused:
+        config.require_variant("no-such-variant")
+    makers = [lambda: SequentialCore(config, "no-such-variant")]
+    if spec.core is not None:
+        module, function = spec.core.split(":")
+        make_core = getattr(importlib.import_module(module), function)
+        makers.append(lambda: make_core(config, "no-such-variant"))
+    for make in makers:
+        with pytest.raises(ValueError, match=r"variant must be") as got:
+            make()
+        assert isinstance(got.value, ConfigError) or "no-such-variant" in str(got.value)
+    with pytest.raises(ConfigError) as got:
+        SequentialCore(config, "no-such-variant")
+    assert str(got.value) == str(refused.value)
 
 
 @pytest.mark.parametrize(("name", "variant", "architecture"), HW_CASES)
