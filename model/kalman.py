@@ -46,7 +46,7 @@ from kfpga.core.formats import (
     precision_frac_bits,
     register_formats,
 )
-from kfpga.core.params import check_measured_start, matrix, number
+from kfpga.core.params import check_measured_start, matrix, number, vector
 from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
 from kfpga.model import start
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
@@ -71,15 +71,7 @@ def _square(name, value):
 
 def _start_vector(x0, n):
     """``x0`` (default zeros) as ``n`` numbers."""
-    if x0 is None:
-        return (0.0,) * n
-    try:
-        values = list(x0)
-    except TypeError:
-        raise TypeError(f"x0 must be a list of {n} numbers, not {x0!r}") from None
-    if len(values) != n:
-        raise ValueError(f"x0 must have {n} entries (one per state), not {len(values)}: {x0!r}")
-    return tuple(number(f"x0[{i}]", v) for i, v in enumerate(values))
+    return (0.0,) * n if x0 is None else vector("x0", x0, n, each="state")
 
 
 def _observation_names(observations, m):

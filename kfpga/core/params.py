@@ -34,14 +34,15 @@ def number(name, value, *, minimum=None, strict=False):
     return value
 
 
-def vector(name, value, length):
-    """A tuple of ``length`` finite numbers."""
+def vector(name, value, length, *, each=None):
+    """A tuple of ``length`` finite numbers (``each``: what one entry is for, named in the message)."""
     try:
         items = list(value)
     except TypeError:
         raise TypeError(f"{name} must be a list of {length} numbers, not {value!r}") from None
     if len(items) != length:
-        raise ValueError(f"{name} must have {length} entries, not {len(items)}: {value!r}")
+        per = f" (one per {each})" if each else ""
+        raise ValueError(f"{name} must have {length} entries{per}, not {len(items)}: {value!r}")
     return tuple(number(f"{name}[{i}]", v) for i, v in enumerate(items))
 
 
