@@ -21,6 +21,7 @@ from kfpga.hw.kalman import FullCore, SteadyCore, default_stages
 from kfpga.model.kalman import SPEC
 from kfpga.sim.amaranth_streams import measure_timing, run_core
 from kfpga.sim.runner import SIMULATORS, build, run
+from tests.helpers.pipeline import stage_table_faults
 from tests.helpers.simulators import need
 
 PRESET_CASES = [("ca3", "steady"), ("ca3", "full"), ("va2", "steady")]
@@ -145,6 +146,15 @@ def test_every_stage_count_is_bit_exact(model, seed):
         report = run_core(config, "steady", stimulus(config, rng, 150), seed=seed, channels=2, p_idle=0.2,
                           p_ready=0.6, options={"stages": stages})
         assert report["compared"] == 150 and report["extra"] == 0, stages
+
+
+@pytest.mark.parametrize("model", list(STAGE_MODELS))
+def test_every_stage_table_cuts_between_steps(model):
+    """Each of the loop's four stage tables, on the steps the model's core has (a second
+    observation splits the last step in two): no stage without a step."""
+    core = SteadyCore(STAGE_MODELS[model]())
+    assert stage_table_faults(core) == []
+    assert max(core.cuts) == len(core.steps)
 
 
 @pytest.mark.cosim

@@ -37,6 +37,7 @@ from kfpga.core.tools import iverilog_parse, iverilog_path, verilator_lint
 from kfpga.hw.generate import write_block
 from kfpga.sim.amaranth_streams import measure_timing, run_core
 from kfpga.sim.runner import SIMULATORS, build, run
+from tests.helpers.pipeline import stage_table_faults
 from tests.helpers.simulators import need
 
 ROUNDINGS = [r.value for r in Rounding]
@@ -182,6 +183,23 @@ def test_declared_latency_and_cycles_per_update_are_measured(name, variant, arch
     # once an input register has filled, inputs are taken and estimates given once per update
     assert accepted[2:7] == [dut.cycles_per_update] * 5
     assert produced[:5] == [dut.cycles_per_update] * 5
+
+
+def test_every_loop_pipeline_cuts_between_its_steps():
+    """Every parallel core that is a loop pipeline, as each filter's default config builds it: its
+    stage table puts each register stage around at least one step (:func:`stage_table_faults`)."""
+    from kfpga.hw.core import LoopPipeline
+
+    checked = {}
+    for spec in registry.specs():
+        config = FilterConfig(filter=spec.name)
+        for variant in spec.variants:
+            if "parallel" in spec.architectures(variant, spec.params()):
+                core = spec.make_core(config, variant, architecture="parallel")
+                if isinstance(core, LoopPipeline):
+                    checked[f"{spec.name}-{variant}"] = stage_table_faults(core)
+    assert len(checked) >= 3, checked  # kalman2, kalman and alphabeta have steady loops
+    assert {case: faults for case, faults in checked.items() if faults} == {}
 
 
 @pytest.mark.parametrize(("name", "variant", "architecture"), HW_CASES)
