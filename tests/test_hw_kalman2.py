@@ -98,6 +98,8 @@ FLAG_ALONE = {
     "x2 shift T=0.5": ("steady", KalmanParams(T=0.5), "x2", 16),
     "x2 product T=0.3": ("steady", KalmanParams(T=0.3), "x2", 16),
     "vt T=0.3": ("steady", KalmanParams(T=0.3), "vt", 14),
+    # the time-varying core's rate steps (T not a power of two) after its write-back
+    "vt T=0.3 full": ("full", KalmanParams(T=0.3), "vt", 14),
     # P0 with p21 + p22 > S: the first K2 = pl21 / S is 1.2, beyond gain's Q1.f, so the
     # divider saturates; nothing else does on that sample
     "divider": ("full", KalmanParams(R=0.5, P0=[[1.0, -2.0], [-2.0, 5.0]]), "gain", 1),
