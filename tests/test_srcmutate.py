@@ -109,6 +109,20 @@ def test_a_design_that_no_longer_elaborates_kills_the_mutant(tmp_path):
     assert equivalence(original, mutant, tmp_path / "eq") == (True, "no design of the tool's set changes")
 
 
+def test_the_designs_take_the_branches_a_period_not_a_power_of_two_takes(tmp_path):
+    """An equivalent verdict is only as wide as the designs compared: besides each core at its
+    defaults (T = 1), the set has each preset and the two models whose period is not a power of
+    two, whose cores build more logic (x2 = v / T in more steps, F's constants multiplied)."""
+    from kfpga.verify.srcmutate import elaborate
+
+    designs, why = elaborate(Path.cwd(), tmp_path)
+    assert designs is not None, why
+    for name in ("kalman2-T0.3-full-parallel", "kalman2-T0.3-steady-parallel", "kalman-tracker-T0.01-steady-parallel",
+                 "kalman-tracker-T0.01-full-sequential", "kalman-ca3-steady-parallel", "alphabeta-ab-bb-steady-parallel",
+                 "tukey53h-53h-attitude-online-parallel"):
+        assert name in designs, name
+
+
 def test_a_line_run_at_import_gets_the_tests_of_its_file():
     from kfpga.verify.srcmutate import Mutant, tests_of
 

@@ -350,6 +350,22 @@ for spec in registry.specs():
                     def staged(spec=spec, config=config, variant=variant, stages=stages):
                         return spec.make_core(config, variant, architecture="parallel", stages=stages)
                     designs[f"{spec.name}-{variant}-stages{stages}"] = staged
+# the branches the defaults do not take: each preset, and the two models of a sample period that
+# is not a power of two (x2 = v / T in more steps; F's constants multiplied), one channel each
+from kfpga.model.kalman import StateSpaceParams
+from kfpga.model.reference import KalmanParams
+models = {f"{spec.name}-{preset}": FilterConfig(filter=spec.name, params=params())
+          for spec in registry.specs() for preset, (_, params) in (spec.presets or {}).items()}
+models["kalman2-T0.3"] = FilterConfig(filter="kalman2", params=KalmanParams(T=0.3, Q=1.0, R=9.0))
+models["kalman-tracker-T0.01"] = FilterConfig(filter="kalman", params=StateSpaceParams(
+    F=((1.0, 0.01, 5e-5), (0.0, 1.0, 0.01), (0.0, 0.0, 1.0)), G=((0.0,), (0.0,), (1.0,)), Q=((1.0,),),
+    H=((1.0, 0.0, 0.0),), R=((25.0,),), T=0.01))
+for label, config in models.items():
+    for variant in config.spec.variants:
+        for arch in config.spec.architectures(variant, config.params):
+            def one(config=config, variant=variant, arch=arch):
+                return config.spec.make_core(config, variant, architecture=arch)
+            designs[f"{label}-{variant}-{arch}"] = one
 done = {}
 for name, make in designs.items():
     try:
