@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from amaranth.sim import Simulator
 
-from kfpga.core.board import SYSTEM_PERIOD_NS
+from kfpga.core.board import SYSTEM_PERIOD_NS, Board
 from kfpga.core.config import FilterConfig
 from kfpga.hw.top import FilterSystem
 from kfpga.sim.ads8364 import ADS8364
@@ -111,6 +111,22 @@ def test_six_channels_pull_all_three_holds_at_once(variant, seed):
     assert [c for c, _, _ in out] == [0, 1, 2, 3, 4, 5] * 3
     expected = source.expected(3)
     assert [r.code for r in adc.reads[:18]] == [int(expected[c, k]) for k in range(3) for c in range(6)]
+    check_against_model(config, variant, out, adc)
+
+
+@pytest.mark.parametrize("variant", ["steady", "full"])
+def test_the_timer_starts_a_conversion_every_period(variant, seed):
+    """A [board] sample rate slower than the free-running ADC: the HOLD pin falls once every
+    clock / rate cycles (600 here, 83.3 kHz), never faster, and every estimate is the model's."""
+    config = FilterConfig(board=Board(sample_rate_hz=50e6 / 600))
+    top = FilterSystem(config, variant=variant, channel=0)
+    assert top.frontend.period == 600
+    source = scenario_source("sine", 64, seed)
+    out, adc, falls = run_system(top, source, 6, max_cycles=6_000)
+    # the first conversion right after reset, then one on each tick of the timer (which counts
+    # from reset, so the first gap is shorter by the first conversion's start)
+    gaps = np.diff(falls["hold_a"]) / SYSTEM_PERIOD_NS
+    assert len(gaps) >= 5 and set(gaps[1:]) == {600} and 0 < gaps[0] <= 600, gaps
     check_against_model(config, variant, out, adc)
 
 
