@@ -148,6 +148,20 @@ def test_every_stage_count_is_bit_exact(model, seed):
         assert report["compared"] == 150 and report["extra"] == 0, stages
 
 
+def test_states_in_block_memory_start_from_a_negative_x0(seed):
+    """Nine channel states, past the eight kept in registers, live in block memory: every word's
+    power-up value packs x0's fields side by side, a negative one included (its sign bits must
+    stop at its own field), and every channel starts from x0."""
+    import dataclasses
+
+    base = preset_config("ca3")
+    params = dataclasses.replace(base.params, x0=(-40.0, 3.5, -0.25))
+    config = FilterConfig(filter="kalman", params=params)
+    rng = np.random.default_rng(seed)
+    report = run_core(config, "steady", stimulus(config, rng, 200), seed=seed, channels=9, p_idle=0.2, p_ready=0.7)
+    assert report["compared"] == 200 and report["extra"] == 0
+
+
 @pytest.mark.parametrize("model", list(STAGE_MODELS))
 def test_every_stage_table_cuts_between_steps(model):
     """Each of the loop's four stage tables, on the steps the model's core has (a second
