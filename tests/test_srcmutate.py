@@ -109,17 +109,18 @@ def test_a_design_that_no_longer_elaborates_kills_the_mutant(tmp_path):
     assert equivalence(original, mutant, tmp_path / "eq") == (True, "no design of the tool's set changes")
 
 
-def test_the_designs_take_the_branches_a_period_not_a_power_of_two_takes(tmp_path):
+def test_the_designs_take_the_branches_the_defaults_do_not(tmp_path):
     """An equivalent verdict is only as wide as the designs compared: besides each core at its
-    defaults (T = 1), the set has each preset and the two models whose period is not a power of
-    two, whose cores build more logic (x2 = v / T in more steps, F's constants multiplied)."""
+    defaults (T = 1, x0 = 0, a free-running ADC), the set has each preset, the two models whose
+    period is not a power of two (x2 = v / T in more steps, F's constants multiplied), the board's
+    conversion timer and states in block memory that start from a negative x0."""
     from kfpga.verify.srcmutate import elaborate
 
     designs, why = elaborate(Path.cwd(), tmp_path)
     assert designs is not None, why
     for name in ("kalman2-T0.3-full-parallel", "kalman2-T0.3-steady-parallel", "kalman-tracker-T0.01-steady-parallel",
                  "kalman-tracker-T0.01-full-sequential", "kalman-ca3-steady-parallel", "alphabeta-ab-bb-steady-parallel",
-                 "tukey53h-53h-attitude-online-parallel"):
+                 "tukey53h-53h-attitude-online-parallel", "top-rate", "kalman-ca3-x0-steady-parallel-9"):
         assert name in designs, name
 
 

@@ -366,6 +366,14 @@ for label, config in models.items():
             def one(config=config, variant=variant, arch=arch):
                 return config.spec.make_core(config, variant, architecture=arch)
             designs[f"{label}-{variant}-{arch}"] = one
+# the board's conversion timer (a [board] sample rate), and states in block memory whose power-up
+# word packs a negative x0
+from dataclasses import replace
+from kfpga.core.board import Board
+designs["top-rate"] = lambda: FilterSystem(FilterConfig(board=Board(sample_rate_hz=50e6 / 600)))
+ca3 = models["kalman-ca3"]
+designs["kalman-ca3-x0-steady-parallel-9"] = lambda: ca3.spec.make_core(
+    FilterConfig(filter="kalman", params=replace(ca3.params, x0=(-40.0, 3.5, -0.25))), "steady", channels=9)
 done = {}
 for name, make in designs.items():
     try:
