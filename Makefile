@@ -55,7 +55,7 @@ mutate: $(STAMP)
 	$(BIN)/python -m kfpga.verify.srcmutate; source=$$?; \
 	exit $$(( netlist || source ))
 
-# the source-level mutants alone (3 to 4 hours on 2 cores from scratch; an interrupted run resumes,
+# the source-level mutants alone (about 3 hours on 2 cores from scratch; an interrupted run resumes,
 # a mutant of an unchanged file keeps its verdict: see docs/verification.md)
 mutate-source: $(STAMP)
 	$(BIN)/python -m kfpga.verify.srcmutate
