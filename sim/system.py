@@ -455,8 +455,12 @@ def run(built, *, params, samples, on_progress=None, tag=None, timeout_s=None):
     step = max(samples // 100, 1)
     cmd = [*built.command, f"+samples={samples}", f"+max_cycles={max_cycles}", f"+progress={step}", f"+dir={run_dir}"]
     t1 = time.perf_counter()
-    if timeout_s is None:  # wall seconds: ten times what the slower simulator needs, and then some
-        timeout_s = 120 + samples * (0.07 if built.simulator == "icarus" else 0.001)
+    if timeout_s is None:  # wall seconds: ten times what the slower simulator needs, and then some,
+        # per sample and per cycle allowed: at a real sample rate (100 Hz: 500,000 cycles a sample)
+        # the cycles, not the samples, take the time (Verilator ran the 3-state tracker's whole
+        # design at 1.1e-7 s a cycle)
+        icarus = built.simulator == "icarus"
+        timeout_s = 120 + samples * (0.07 if icarus else 0.001) + max_cycles * (1e-4 if icarus else 1e-6)
     returncode, tail = _simulate(cmd, run_dir, timeout_s, on_progress, built.simulator)
     sim_wall = time.perf_counter() - t1
     (run_dir / "sim.log").write_text("\n".join(tail) + "\n")
