@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kfpga.core.errors import ConfigError
-from kfpga.core.formats import register_formats
+from kfpga.core.formats import MAX_WORD, register_formats
 from kfpga.core.params import number, vector
 from kfpga.core.spec import Constant, FilterSpec, Mode, MutationBlock, Output, Variant
 from kfpga.model import cvloop as eq
@@ -206,10 +206,11 @@ def _ranges(params, stimulus=None):
     return float_ranges(SPEC, params, list(VARIANTS.values()), stimulus)
 
 
-def _default_formats(params, ranges, *, operand_bits, state_frac):
+def _default_formats(params, ranges, *, operand_bits, state_frac, max_word=MAX_WORD):
     err = _error_std(params)
     noise = {"x1": err["x"], "v": params.T * err["v"], "vt": params.T * err["v"], "x2": err["v"]}
-    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, noise=noise)
+    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, noise=noise,
+                               max_word=max_word)
     eq.loop_formats(formats, (params.alpha, params.beta), (noise["x1"], noise["v"]))  # the rounding the loop feeds back
     return eq.finish_formats(params, formats, state_frac=state_frac)
 

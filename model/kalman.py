@@ -26,6 +26,15 @@ costs nothing (a shift; F = [[1, T], [0, 1]] with T = 2**k has only such entries
 entry of F is a constant multiplier whose operand is the state rounded into an 18-bit operand
 ``xo<j>``. H must select states (entries 0 or +-2**k), as sensors do; the time-varying variant
 needs F's entries to be 0 or +-2**k as well.
+
+Every term of a sum that is a product (by a gain, or by an entry of F other than 0 and +-1) is a
+cast point: rounded into a format of its own before it enters the sum where the config gives it
+one (by default, where the exact sum would pass the word budget), else exact::
+
+    ft<i><j>     F_ij x_j, a term of (F x)_i           ke<i><j>     K_ij e_j, a term of x_i
+    fpt<i><j><c> F_ic P_cj, a term of (F P)_ij         plt<i><j><c> F_jc (F P)_ic, a term of Pl_ij
+    kh<i><j><a>  K_ia (H Pl)_aj, a term of P_ij        dp1, dp2     S11 S22 and S12^2, of det S
+    kp<i><b><t>  the two products of K's numerator b   (two observations)
 """
 
 from __future__ import annotations
@@ -39,7 +48,7 @@ from kfpga.core.board import WORST_PATH_GOAL_NS
 from kfpga.core.errors import ConfigError
 from kfpga.core.fixed import QFormat
 from kfpga.core.formats import (
-    MAX_OPERAND_BITS,
+    MAX_WORD,
     constant_frac_bits,
     covariance_frac,
     noise_frac_bits,
@@ -362,6 +371,14 @@ def _term(ops, k, name, x, operand, cache):
     return ops.mul(c, cache[operand])
 
 
+def _cast_term(ops, k, term, entry, point):
+    """``term`` (the product of the constant ``k[entry]`` and a value) cast into ``point``; a term by
+    +-1 is the value itself (no cast point), a missing term stays missing."""
+    if term is None or entry in k["unit"]:
+        return term
+    return ops.cast(term, point)
+
+
 def _sum(ops, k, terms):
     """The exact sum of the terms that exist (a constant 0 when none does)."""
     terms = [t for t in terms if t is not None]
@@ -382,10 +399,11 @@ def predict_operands(ops, k, x):
 
 
 def predict_terms(ops, k, x, xo):
-    """The terms F_ij x_j of F x, each exact (a shift, or F_ij times the operand ``xo[j]``);
-    ``None`` where F_ij is 0."""
+    """The terms F_ij x_j of F x (a shift, or F_ij times the operand ``xo[j]``), each cast into
+    ``ft<i><j>``; ``None`` where F_ij is 0."""
     n = k["n"]
-    return [[_term(ops, k, f"F{i}{j}", x[j], f"xo{j + 1}", {f"xo{j + 1}": xo[j]} if j in xo else {})
+    return [[_cast_term(ops, k, _term(ops, k, f"F{i}{j}", x[j], f"xo{j + 1}", {f"xo{j + 1}": xo[j]} if j in xo else {}),
+                        f"F{i}{j}", f"ft{i + 1}{j + 1}")
              for j in range(n)] for i in range(n)]
 
 
@@ -418,8 +436,8 @@ def correct(ops, k, xl, products):
 
 
 def gain_products(ops, k, e):
-    """K_ij e_j of the steady-state variant (K constant)."""
-    return [[ops.mul(k[f"K{i}{j}"], e[j]) for j in range(k["m"])] for i in range(k["n"])]
+    """K_ij e_j of the steady-state variant (K constant), each cast into ``ke<i><j>``."""
+    return [[ops.cast(ops.mul(k[f"K{i}{j}"], e[j]), f"ke{i + 1}{j + 1}") for j in range(k["m"])] for i in range(k["n"])]
 
 
 def _outputs(k, x, yh):
@@ -444,9 +462,10 @@ def _pname(i, j):
 
 
 def covariance_fp(ops, k, p):
-    """F P, exact (``p(i, j)`` reads P)."""
+    """F P, exact but for its terms F_ic P_cj, each cast into ``fpt<i><j><c>`` (``p(i, j)`` reads P)."""
     n = k["n"]
-    return [[_sum(ops, k, [_term(ops, k, f"F{i}{c}", p(c, j), None, {}) for c in range(n)]) for j in range(n)]
+    return [[_sum(ops, k, [_cast_term(ops, k, _term(ops, k, f"F{i}{c}", p(c, j), None, {}), f"F{i}{c}",
+                                      f"fpt{i + 1}{j + 1}{c + 1}") for c in range(n)]) for j in range(n)]
             for i in range(n)]
 
 
@@ -458,7 +477,8 @@ def covariance_sums(ops, k, fp):
     for i in range(n):
         cache = {}
         for j in range(i, n):
-            terms = [_term(ops, k, f"F{j}{c}", fp[i][c], f"fp{i + 1}{c + 1}", cache) for c in range(n)]
+            terms = [_cast_term(ops, k, _term(ops, k, f"F{j}{c}", fp[i][c], f"fp{i + 1}{c + 1}", cache), f"F{j}{c}",
+                                f"plt{i + 1}{j + 1}{c + 1}") for c in range(n)]  # each cast into plt<i><j><c>
             out[(i, j)] = _sum(ops, k, [*terms, k.get(f"GQG{i}{j}")])
     return out
 
@@ -490,11 +510,14 @@ def gains_two(ops, k, hp):
     n = k["n"]
     s = {(a, b): ops.rq(_sum(ops, k, [_term(ops, k, f"H{b}{i}", hp[a][i], None, {}) for i in range(n)]
                              + [k.get(f"R{a}{b}")]), f"s{a + 1}{b + 1}") for a in range(2) for b in range(a, 2)}
-    det = ops.rq(ops.sub(ops.mul(s[(0, 0)], s[(1, 1)]), ops.mul(s[(0, 1)], s[(0, 1)])), "det")  # det S
+    det = ops.rq(ops.sub(ops.cast(ops.mul(s[(0, 0)], s[(1, 1)]), "dp1"), ops.cast(ops.mul(s[(0, 1)], s[(0, 1)]), "dp2")),
+                 "det")  # det S
     gains = []
     for i in range(n):
-        n1 = ops.rq(ops.sub(ops.mul(hp[0][i], s[(1, 1)]), ops.mul(hp[1][i], s[(0, 1)])), "kn", f"kn{i}0")
-        n2 = ops.rq(ops.sub(ops.mul(hp[1][i], s[(0, 0)]), ops.mul(hp[0][i], s[(0, 1)])), "kn", f"kn{i}1")
+        a, b = (ops.cast(ops.mul(hp[0][i], s[(1, 1)]), f"kp{i + 1}11"), ops.cast(ops.mul(hp[1][i], s[(0, 1)]), f"kp{i + 1}12"))
+        n1 = ops.rq(ops.sub(a, b), "kn", f"kn{i}0")
+        a, b = (ops.cast(ops.mul(hp[1][i], s[(0, 0)]), f"kp{i + 1}21"), ops.cast(ops.mul(hp[0][i], s[(0, 1)]), f"kp{i + 1}22"))
+        n2 = ops.rq(ops.sub(a, b), "kn", f"kn{i}1")
         gains.append([ops.div(n1, det, f"k{i + 1}", f"K{i}0"), ops.div(n2, det, f"k{i + 1}", f"K{i}1")])
     return gains
 
@@ -509,13 +532,14 @@ def update_products(ops, k, gains, e, hp):
 
 
 def update_corrections(ops, k, xl, pl, products):
-    """x = [xl + K e]_x and P = [Pl - K H Pl]_p from the products: the next state."""
+    """x = [xl + K e]_x and P = [Pl - K H Pl]_p from the products (each cast into ``ke<i><j>`` and
+    ``kh<i><j><a>``): the next state."""
     n, m = k["n"], k["m"]
-    xn = correct(ops, k, xl, [[products[("e", i, j)] for j in range(m)] for i in range(n)])
+    xn = correct(ops, k, xl, [[ops.cast(products[("e", i, j)], f"ke{i + 1}{j + 1}") for j in range(m)] for i in range(n)])
     state = {f"x{i + 1}": xn[i] for i in range(n)}
     for i in range(n):
         for j in range(i, n):
-            kh = _sum(ops, k, [products[("p", i, j, a)] for a in range(m)])
+            kh = _sum(ops, k, [ops.cast(products[("p", i, j, a)], f"kh{i + 1}{j + 1}{a + 1}") for a in range(m)])
             state[f"p{i + 1}{j + 1}"] = ops.rq(ops.sub(pl[(i, j)], kh), f"p{i + 1}{j + 1}")
     return state
 
@@ -560,7 +584,10 @@ def _matrix_constants(params):
 def _structure(params):
     from kfpga.core.fixed import QFormat
 
-    return {"n": params.n, "m": params.m, "observations": params.observations, "zero": Constant(0.0, QFormat(2, 0))}
+    unit = frozenset(f"F{i}{j}" for i, row in enumerate(params.F) for j, v in enumerate(row) if abs(v) == 1)
+    unit |= {f"H{j}{i}" for j, row in enumerate(params.H) for i, v in enumerate(row) if abs(v) == 1}
+    return {"n": params.n, "m": params.m, "observations": params.observations, "zero": Constant(0.0, QFormat(2, 0)),
+            "unit": unit}
 
 
 def _steady_constants(params):
@@ -666,7 +693,25 @@ def _points_for(params):
     names += [f"p{i + 1}{j + 1}" for i, j in tri] + [f"pl{i + 1}{j + 1}" for i, j in tri]
     names += [f"fp{i + 1}{c + 1}" for i in range(n) for c in range(n) if _fp_rounded(params, i, c)]
     names += ["s"] if m == 1 else ["s11", "s12", "s22", "det", "kn"]
+    names += _cast_points(params)
     return [p for p in POINTS if p in names]
+
+
+def _cast_points(params):
+    """The cast points of a model with these parameters: a product term of every sum."""
+    n, m, f = params.n, params.m, params.F
+
+    def scaled(i, j):  # a term by F_ij that is not the value itself
+        return f[i][j] != 0 and abs(f[i][j]) != 1
+
+    names = [f"ft{i + 1}{j + 1}" for i in range(n) for j in range(n) if scaled(i, j)]
+    names += [f"ke{i + 1}{j + 1}" for i in range(n) for j in range(m)]
+    names += [f"fpt{i + 1}{j + 1}{c + 1}" for i in range(n) for j in range(n) for c in range(n) if scaled(i, c)]
+    names += [f"plt{i + 1}{j + 1}{c + 1}" for i in range(n) for j in range(i, n) for c in range(n) if scaled(j, c)]
+    names += [f"kh{i + 1}{j + 1}{a + 1}" for i in range(n) for j in range(i, n) for a in range(m)]
+    if m == 2:
+        names += ["dp1", "dp2"] + [f"kp{i + 1}{b}{t}" for i in range(n) for b in (1, 2) for t in (1, 2)]
+    return names
 
 
 def _fp_rounded(params, i, c):
@@ -697,7 +742,26 @@ def _all_points():
             for name, what in (("s11", "S11"), ("s12", "S12"), ("s22", "S22"))]
     pts.append(Point("det", "det S = S11 S22 - S12^2 (the divisor, two observations)", variants=("full",), frac="s11"))
     pts.append(Point("kn", "numerators of K = Pl H^T adj(S) (two observations)", variants=("full",), frac="pl11"))
-    return {p.name: p for p in pts}
+    return {p.name: p for p in pts + _all_cast_points()}
+
+
+def _all_cast_points():
+    states, obs = range(1, MAX_STATES + 1), range(1, MAX_OBS + 1)
+    pts = [Point(f"ft{i}{j}", f"F[{i - 1}][{j - 1}] x{j}, a term of (F x){i}", role="cast") for i in states for j in states]
+    pts += [Point(f"ke{i}{j}", f"K[{i - 1}][{j - 1}] e{j}, a term of x{i}", role="cast") for i in states for j in obs]
+    pts += [Point(f"fpt{i}{j}{c}", f"F[{i - 1}][{c - 1}] P{min(c, j)}{max(c, j)}, a term of (F P){i}{j}", role="cast",
+                  variants=("full",)) for i in states for j in states for c in states]
+    pts += [Point(f"plt{i}{j}{c}", f"F[{j - 1}][{c - 1}] (F P){i}{c}, a term of Pl{i}{j}", role="cast", variants=("full",))
+            for i in states for j in range(i, MAX_STATES + 1) for c in states]
+    pts += [Point(f"kh{i}{j}{a}", f"K[{i - 1}][{a - 1}] (H Pl)[{a - 1}][{j - 1}], a term of P{i}{j}", role="cast",
+                  variants=("full",)) for i in states for j in range(i, MAX_STATES + 1) for a in obs]
+    pts += [Point("dp1", "S11 S22, a term of det S (two observations)", role="cast", variants=("full",)),
+            Point("dp2", "S12^2, a term of det S (two observations)", role="cast", variants=("full",))]
+    terms = {(1, 1): "(H Pl)[0][{i}] S22", (1, 2): "(H Pl)[1][{i}] S12", (2, 1): "(H Pl)[1][{i}] S11",
+             (2, 2): "(H Pl)[0][{i}] S12"}
+    pts += [Point(f"kp{i}{b}{t}", f"{terms[(b, t)].format(i=i - 1)}, a term of K's numerator {i}{b} (two observations)",
+                  role="cast", variants=("full",)) for i in states for b in (1, 2) for t in (1, 2)]
+    return pts
 
 
 POINTS = _all_points()
@@ -734,7 +798,7 @@ def _ranges(params, stimulus=None):
     return float_ranges(SPEC, params, variants, stimulus)
 
 
-def _default_formats(params, ranges, *, operand_bits, state_frac):
+def _default_formats(params, ranges, *, operand_bits, state_frac, max_word=MAX_WORD):
     err = _error_std(params, measurement_only=True)
     # the registers' steps small against the float filter's error of each state and prediction
     # (the part the measurement noise alone causes: its floor on any signal)
@@ -743,7 +807,8 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
         noise = {f"x{i + 1}": err[f"x{i + 1}"] for i in range(params.n)}
         noise.update({f"xo{i + 1}": err[f"x{i + 1}"] for i in range(params.n)})  # x_i as F's operand
         noise.update({f"yh{j + 1}": err[f"yhat{j + 1}"] for j in range(params.m)})
-    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, noise=noise)
+    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, noise=noise,
+                               max_word=max_word)
     # the innovation's step must be small against the observation noise it carries into every
     # state (at most a quarter of its standard deviation), else the rounding of e, not the
     # noise, sets the error (R = 0.01: 0.1 codes); beyond the multiplier width it takes a
@@ -756,7 +821,7 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
             formats[f"e{j + 1}"] = QFormat(e.int_bits, want, e.rounding, e.overflow)
     _f_formats(params, ranges, formats)
     _loop_formats(params, formats, err)
-    _covariance_formats(params, formats)
+    _covariance_formats(params, formats, max_word)
     # a predicted observation that is one predicted state (H selects it) keeps that state's format:
     # then it is no extra logic
     for j, row in enumerate(params.H):
@@ -766,7 +831,7 @@ def _default_formats(params, ranges, *, operand_bits, state_frac):
     return formats
 
 
-def _covariance_formats(params, formats):
+def _covariance_formats(params, formats, max_word):
     """The predicted covariance that feeds the division: its guard bits, and P as fine; S as
     fine as Pl; (F P)_ic, which feeds Pl_ij through F_jc, as fine as the finest of those, two
     bits finer."""
@@ -775,7 +840,7 @@ def _covariance_formats(params, formats):
             name = f"pl{i + 1}{j + 1}"
             if name in formats:
                 pl = formats[name]
-                frac = covariance_frac(pl)
+                frac = covariance_frac(pl, max_word)
                 formats[name] = QFormat(pl.int_bits, frac, pl.rounding, pl.overflow)
                 p = formats[f"p{i + 1}{j + 1}"]
                 if p.frac_bits < frac:
@@ -790,7 +855,8 @@ def _covariance_formats(params, formats):
                 fine = max(formats[f"pl{min(i, j) + 1}{max(i, j) + 1}"].frac_bits for j in range(i, params.n)) + 2
                 fp = formats[name]
                 if fine > fp.frac_bits:
-                    formats[name] = QFormat(fp.int_bits, min(fine, MAX_OPERAND_BITS - fp.int_bits), fp.rounding, fp.overflow)
+                    formats[name] = QFormat(fp.int_bits, max(fp.frac_bits, min(fine, max_word - fp.int_bits)), fp.rounding,
+                                            fp.overflow)
 
 
 def _loop_formats(params, formats, err):

@@ -41,7 +41,7 @@ import numpy as np
 from kfpga.core.board import WORST_PATH_GOAL_NS
 from kfpga.core.errors import ConfigError
 from kfpga.core.fixed import QFormat
-from kfpga.core.formats import covariance_frac, register_formats
+from kfpga.core.formats import MAX_WORD, covariance_frac, register_formats
 from kfpga.core.spec import Constant, FilterSpec, MutationBlock, Output, Variant
 from kfpga.model import start
 from kfpga.model.cvloop import (
@@ -154,7 +154,8 @@ def _full_initial(params):
 
 
 def _full_settled(params):
-    """The covariance the time-varying gain settles to, in datapath units (P' = D P D)."""
+    """The covariance the time-varying gain settles to, in datapath units (P' = D P D), and the gains
+    K1 and T*K2 the divider settles to (each update's quotient holds them as finely)."""
     if not params.Q > 0:
         return []
     k, pl = steady_state_gain(params.T, params.Q, params.R)
@@ -165,6 +166,7 @@ def _full_settled(params):
     for name, m, point in (("P", d @ p @ d, "p"), ("Pl", d @ pl @ d, "pl")):
         out += [(f"{name}{i + 1}{j + 1}", float(m[i][j]), point) for i in range(2) for j in range(2)
                 if abs(m[i][j]) > 1e-12 * np.max(np.abs(m))]
+    out += [(label, float(value), "gain") for label, value in (("K1", k[0]), ("T*K2", params.T * k[1])) if value > 0]
     return out
 
 
@@ -199,18 +201,19 @@ def _ranges(params, stimulus=None):
     return float_ranges(SPEC, params, variants, stimulus)
 
 
-def _default_formats(params, ranges, *, operand_bits, state_frac):
+def _default_formats(params, ranges, *, operand_bits, state_frac, max_word=MAX_WORD):
     err = _error_std(params, measurement_only=True)
     # the registers' steps small against the float filter's error there (v = T x2), the part the
     # measurement noise alone causes: the floor of that error on any signal
     noise = ({"x1": min(err["x1"], err["yhat"]), "v": params.T * err["x2"], "vt": params.T * err["x2"], "x2": err["x2"]}
              if err else None)
-    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, noise=noise)
+    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, noise=noise,
+                               max_word=max_word)
     if err:  # the rounding the loop feeds back: small gains forget it slowly
         loop_formats(formats, steady_gain(params), (noise["x1"], noise["v"]))
     # the predicted covariance that feeds the division: its guard bits, and P and S as fine
     pl = formats["pl"]
-    frac = covariance_frac(pl)
+    frac = covariance_frac(pl, max_word)
     formats["pl"] = QFormat(pl.int_bits, frac, pl.rounding, pl.overflow)
     for name in ("p", "s"):
         f = formats[name]

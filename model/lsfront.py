@@ -33,6 +33,7 @@ import numpy as np
 
 from kfpga.core.ads8364 import CODE_FORMAT, CODE_MAX
 from kfpga.core.fixed import QFormat, Rounding, bits_for
+from kfpga.core.formats import MAX_WORD
 from kfpga.core.params import number
 from kfpga.core.spec import Constant, FilterSpec, MutationBlock, Output, Point, Variant
 
@@ -508,10 +509,10 @@ def _ranges(params, stimulus=None):
     return ranges
 
 
-def _default_formats(params, ranges, *, operand_bits, state_frac):
+def _default_formats(params, ranges, *, operand_bits, state_frac, max_word=MAX_WORD):
     from kfpga.core.formats import noise_frac_bits, register_formats
 
-    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac)
+    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, max_word=max_word)
     # an innovation's step small against the noise of the observation it carries (a quarter of
     # its standard deviation): the slope of the longest window is the quietest observation
     n = max(params.windows)

@@ -37,7 +37,7 @@ from importlib import resources
 import numpy as np
 
 from kfpga.core.fixed import QFormat
-from kfpga.core.formats import MAX_OPERAND_BITS
+from kfpga.core.formats import MAX_WORD
 from kfpga.core.params import matrix, number
 from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
 from kfpga.model.start import check_init, measured
@@ -579,21 +579,21 @@ def _ranges(params, stimulus=None):
     return float_ranges(SPEC, params, list(VARIANTS.values()), _stimulus(params) if stimulus is None else stimulus)
 
 
-def _default_formats(params, ranges, *, operand_bits, state_frac):
+def _default_formats(params, ranges, *, operand_bits, state_frac, max_word=MAX_WORD):
     from kfpga.core.formats import register_formats
 
-    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac)
+    formats = register_formats(SPEC, params, ranges, operand_bits=operand_bits, state_frac=state_frac, max_word=max_word)
     # the innovation as fine as the angle: the gain of the angle is close to 1 (s = 100 keeps the
     # prediction covariance far above R), so e's rounding goes into every prediction undamped
     # (0.013 deg rms with whole codes, 0.0002 with x1's fraction bits); its product is on the
     # sequential core's one multiplier, which the squares of D already make wider than 18 bits
     e, x1 = formats["e"], formats["x1"]
     formats["e"] = QFormat(e.int_bits, max(e.frac_bits, x1.frac_bits), e.rounding, e.overflow)
-    # the plain form's covariance is a multiplier operand (K P, s A P A^T): at most 36 bits, its
-    # range taking the integer bits and the rest fraction bits
+    # the plain form's covariance is a multiplier operand (K P, s A P A^T): within the word budget,
+    # its range taking the integer bits and the rest fraction bits
     p = formats["p"]
-    if p.width > MAX_OPERAND_BITS:
-        formats["p"] = QFormat(p.int_bits, max(0, MAX_OPERAND_BITS - p.int_bits), p.rounding, p.overflow)
+    if p.width > max_word:
+        formats["p"] = QFormat(p.int_bits, max(0, max_word - p.int_bits), p.rounding, p.overflow)
     return formats
 
 
@@ -724,7 +724,7 @@ def word_config(base, variant, register_frac, operand_bits):
     for name in operands:
         formats[name] = QFormat(base.formats[name].int_bits, max(0, operand_bits - base.formats[name].int_bits))
     try:
-        return FilterConfig(filter="roll", params=base.params, formats=formats, check_ranges=False, max_operand_bits=62)
+        return FilterConfig(filter="roll", params=base.params, formats=formats, check_ranges=False, max_word=62)
     except ConfigError as exc:
         return str(exc)
 

@@ -53,7 +53,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from kfpga.core.board import WORST_PATH_GOAL_NS
 from kfpga.core.fixed import QFormat, Rounding
-from kfpga.core.formats import precision_frac_bits
+from kfpga.core.formats import MAX_WORD, precision_frac_bits
 from kfpga.core.params import number
 from kfpga.core.spec import Constant, FilterSpec, Mode, MutationBlock, Output, Point, Prefilter, Variant
 
@@ -397,7 +397,7 @@ def _ranges(params, stimulus=None):
     return {"x": stored, "x3": stored, "y": top, "threshold": params.threshold}
 
 
-def _default_formats(params, ranges, *, operand_bits, state_frac):
+def _default_formats(params, ranges, *, operand_bits, state_frac, max_word=MAX_WORD):
     """The samples' own 16 bits everywhere; x3 rounded to the nearest code; the threshold in as
     many bits as it needs, and the fraction bits that hold it within 1 %."""
     frac = precision_frac_bits(params.threshold)

@@ -7,6 +7,7 @@ import pytest
 
 from kfpga.core.config import ConfigError, FilterConfig, analysed_ranges
 from kfpga.core.fixed import QFormat
+from kfpga.core.fixedmodel import FixedModel
 from kfpga.model.kalman2 import POINTS
 from kfpga.model.reference import KalmanParams
 from tests.helpers.expected import REGISTERED
@@ -81,26 +82,47 @@ def test_format_too_narrow_names_field_and_range():
         KalmanConfig(formats={"x1": QFormat(16, 8)})
 
 
-def test_product_too_wide_is_rejected():
-    with pytest.raises(ConfigError, match=exactly(
-            "the sum xl1 = x1 + v is 71 bits wide with formats.v = Q17.8, formats.x1 = Q20.50; sums and products "
-            "must stay within 62 bits to be held exactly: narrow these formats")):
-        KalmanConfig(formats={"x1": QFormat(20, 50), "xl1": QFormat(20, 50)})
-    with pytest.raises(ConfigError, match=exactly(
-            "the sum x1 = xl1 + k1*e is 63 bits wide with formats.e = Q17.1, formats.gain = Q2.16, formats.xl1 = "
-            "Q45.16; sums and products must stay within 62 bits to be held exactly: narrow these formats")):
-        KalmanConfig(formats={"xl1": QFormat(45, 16)})
+def test_no_width_is_refused_and_a_batch_past_int64_runs_exact(seed):
+    """Formats whose exact sums pass 62 bits (x1 + v at 50 fraction bits: 71 bits) are taken: the
+    batch runs on Python ints, and gives the integers of each channel run alone and of the
+    exact-rational spec."""
+    config = KalmanConfig(formats={"x1": QFormat(20, 50), "xl1": QFormat(20, 50)})
+    assert max(i.width for i in config.width_report("steady").past(62)) == 71
+    rng = np.random.default_rng(seed)
+    y = np.clip(np.round(np.cumsum(rng.normal(0, 400, (3, 400)), axis=1)), -32768, 32767).astype(np.int64)
+    y[:, 200:210] = 32767
+    for variant in ("steady", "full"):
+        model = FixedModel(config, variant=variant)
+        assert model.kernel(True).wide
+        batch = model.run(y)
+        for row in range(3):
+            alone = model.run(y[row])
+            for field in config.output_names:
+                np.testing.assert_array_equal(batch.outputs[field][row], alone.outputs[field], err_msg=f"{variant} {field}")
+            np.testing.assert_array_equal(batch.overflow[row], alone.overflow)
+        exact = model.run_exact(y[0, :60])
+        for field in config.output_names:
+            np.testing.assert_array_equal(exact.outputs[field], batch.outputs[field][0, :60], err_msg=f"{variant} {field}")
 
 
-def test_operand_wider_than_a_multiplier_is_rejected():
-    with pytest.raises(ConfigError, match=exactly(
-            "formats.e = Q17.20 is 37 bits wide, but it feeds a multiplier, whose operands are at most 36 bits "
-            "(2 x 2 of Cyclone II's 18x18 embedded multipliers)")):
-        KalmanConfig(formats={"e": QFormat(17, 20)}, check_ranges=False)
-    with pytest.raises(ConfigError, match=exactly(
-            "formats.e = Q17.4 is 21 bits wide, but it feeds a multiplier, whose operands are at most 18 bits "
-            "(one Cyclone II 18x18 embedded multiplier)")):
-        KalmanConfig(formats={"e": QFormat(17, 4)}, max_operand_bits=18)
+def test_an_operand_past_the_word_budget_is_built_and_reported():
+    config = KalmanConfig(formats={"e": QFormat(17, 20)}, check_ranges=False)
+    wide = config.over_budget("steady")
+    assert wide and all(i.width > config.max_word for i in wide)
+    assert any(i.kind == "product" and "e" in i.points for i in wide)
+    assert not KalmanConfig().over_budget("steady")
+    narrow = KalmanConfig(formats={"e": QFormat(17, 4)}, max_word=18)
+    assert narrow.max_word == 18 and narrow.over_budget("steady")
+    with pytest.raises(ConfigError, match=exactly("formats.max_word must be an integer >= 2 (bits), not 1")):
+        KalmanConfig(max_word=1)
+
+
+def test_the_word_budget_is_a_setting_of_the_formats_table():
+    text = KalmanConfig(max_word=30).to_toml()
+    assert "[formats]\nmax_word = 30" in text
+    import tomllib
+
+    assert KalmanConfig.from_dict(tomllib.loads(text)).max_word == 30
 
 
 def test_r_too_small_for_its_format():
@@ -125,7 +147,7 @@ def test_unknown_keys_are_rejected():
     with pytest.raises(ConfigError, match=exactly("config: unknown key model.P1; the kalman2 filter has: T, Q, R, P0, x0, init")):
         KalmanConfig.from_dict({"model": {"P1": 3}})
     with pytest.raises(ConfigError, match=exactly(
-            "formats.x3: unknown quantisation point; known: x1, xl1, v, x2, e, gain, p, pl, s, inv_t, vt")):
+            "formats.x3: unknown quantisation point; this model has x1, xl1, v, x2, e, gain, p, pl, s")):
         KalmanConfig.from_dict({"formats": {"x3": "Q4.4"}})
     with pytest.raises(ConfigError, match=exactly(
             "config: unknown section(s) modle; expected [filter], [model], [formats.*] and [board]")):

@@ -130,12 +130,14 @@ def test_cv2_preset_is_the_paper_filter_and_its_golden_integers():
 
 def test_general_steady_filter_equals_the_paper_filter_at_the_same_formats(seed):
     """At T = 1 the paper's steady filter is x = F x + K (y - H F x) with F = [[1, 1], [0, 1]]:
-    given the same formats (xl2 = x2 exactly, yhat = xl1), both give the same integers."""
+    given the same formats (xl2 = x2 exactly, yhat = xl1) and its products K e exact, as the paper's
+    are, both give the same integers."""
     paper = FilterConfig(filter="kalman2")
     f = paper.formats
     general = FilterConfig(filter="kalman", params=StateSpaceParams(), formats={
         "x1": f["x1"], "x2": f["v"], "xl1": f["xl1"], "xl2": f["v"], "yh1": f["xl1"], "e1": f["e"],
-        "k1": f["gain"], "k2": f["gain"]})
+        "k1": f["gain"], "k2": f["gain"], "ke11": "exact", "ke21": "exact"})
+    assert {name: fmt for name, fmt in general.casts.items() if name.startswith("ke")} == {"ke11": None, "ke21": None}
     rng = np.random.default_rng(seed)
     y = np.clip(np.round(np.cumsum(rng.normal(0, 300, 3000))), -32768, 32767).astype(np.int64)
     y[1000:1010] = 32767

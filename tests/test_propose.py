@@ -86,3 +86,12 @@ def test_the_proposal_holds_on_seeds_it_did_not_see(proposal, variant, capsys):
         m = json.loads(out)
         assert code == 0 and m["overflows"] == 0, (variant, other)
         assert abs(m["rmse_fixed_over_float"] - 1) <= 0.01, (variant, other, m["rmse_fixed_over_float"])
+
+
+def test_progress_is_shown_only_on_a_terminal(capsys, tmp_path):
+    """Not --quiet, stderr not a terminal (a log file, CI): no progress frames, only the report's lines."""
+    out = tmp_path / "p.toml"
+    code = main(["propose", "--samples", "2000", "--seed", "3", "--seeds", "2", "--variant", "steady", "--out", str(out)])
+    _, err = capsys.readouterr()
+    assert code == 0 and out.is_file()
+    assert "\r" not in err and "candidate" not in err, err

@@ -165,6 +165,14 @@ def warn_precision(config):
 # -- output ---------------------------------------------------------------------------------------
 
 
+def progress_bar(quiet=False, **options):
+    """A tqdm progress bar on stderr, shown only on a terminal (a log file or a CI run gets no
+    frames) and never with ``quiet``."""
+    from tqdm import tqdm
+
+    return tqdm(file=sys.stderr, disable=True if quiet else None, **options)
+
+
 def pick_seed(seed):
     return secrets.randbelow(2**31) if seed is None else seed
 
@@ -351,12 +359,10 @@ def need_hz(config, channels):
 
 def explore(config, variant, channels, *, quiet=False):
     """Every candidate design (``kfpga.flows.explore``), with a progress bar."""
-    from tqdm import tqdm
-
     from kfpga.flows.explore import candidates
 
     # no bar when stderr is not a terminal (a log, a test): only the line of the choice
-    with tqdm(desc="explore", unit="design", file=sys.stderr, disable=True if quiet else None) as bar:
+    with progress_bar(quiet, desc="explore", unit="design") as bar:
         def progress(i, total, label):
             bar.total = total
             bar.n = i

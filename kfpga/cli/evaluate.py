@@ -4,8 +4,6 @@ them."""
 
 from __future__ import annotations
 
-import sys
-
 from kfpga.cli import common
 from kfpga.core import registry
 from kfpga.core.claims import claims_markdown, claims_table
@@ -71,12 +69,9 @@ def _runs_label(seeds):
 
 def _measures(evaluation, args, seeds, first):
     """``measure`` (or ``run``) on every seed, the first's full run reused; a bar on a terminal."""
-    from tqdm import tqdm
-
     measure = evaluation.measure or evaluation.run
     out = []
-    with tqdm(total=len(seeds), desc="evaluate", unit="seed", file=sys.stderr,
-              disable=True if args.quiet or len(seeds) == 1 else None) as bar:
+    with common.progress_bar(args.quiet or len(seeds) == 1, total=len(seeds), desc="evaluate", unit="seed") as bar:
         for seed in seeds:
             out.append(first if evaluation.measure is None and seed == seeds[0] else measure(args, seed))
             bar.update(1)

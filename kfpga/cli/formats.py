@@ -50,9 +50,37 @@ def formats_table(config):
             "overflow": fmt.overflow.value,
             "variants": ",".join(point.variants or config.spec.variants),
             "multiplier_operand": point.operand,
+            "cast": point.cast,
             "description": point.description,
         })
     return rows
+
+
+def budget_lines(config):
+    """What the word budget did: the cast points with formats and without, and what the datapath
+    still builds wider than the budget (a product, a divider's dividend), per variant."""
+    casts = config.casts
+    given = [name for name, fmt in casts.items() if fmt is not None]
+    if casts:
+        lines = [f"word budget: formats.max_word = {config.max_word} bits; {len(given)} of the {len(casts)} cast points "
+                 "round a product before its sum (marked [cast])" + (", the others keep it exact" if len(given) < len(casts)
+                                                                    else "")]
+    else:
+        lines = [f"word budget: formats.max_word = {config.max_word} bits; the {config.filter} filter has no cast points: "
+                 "its sums stay exact"]
+    for variant, v in config.spec.variants.items():
+        if v.applies(config.params) is not None:
+            continue
+        wide = config.over_budget(variant)
+        if wide:
+            shown = ", ".join(f"{_short(i.text)} ({i.width} bits, {i.kind})" for i in wide[:4])
+            more = f" and {len(wide) - 4} more" if len(wide) > 4 else ""
+            lines.append(f"built wider than the budget ({variant}): {shown}{more}")
+    return lines
+
+
+def _short(text, most=40):
+    return text if len(text) <= most else text[:most - 3] + "..."
 
 
 def run(args):
@@ -68,6 +96,8 @@ def run(args):
         common.emit_json(formats_table(config))
     else:
         _print(formats_table(config))
+        for line in budget_lines(config):
+            print(line)
     # the table is only worth writing if the other commands take it: every variant that applies
     for variant, v in config.spec.variants.items():
         if v.applies(config.params) is None:
@@ -76,12 +106,13 @@ def run(args):
 
 
 def _print(rows):
-    print(f"{'point':<6} {'format':<7} {'bits':>4} {'covers':>12} {'analysed max':>13} {'rounding':<10} "
+    width = max([6] + [len(r["point"]) for r in rows])
+    print(f"{'point':<{width}} {'format':<7} {'bits':>4} {'covers':>12} {'analysed max':>13} {'rounding':<10} "
           f"{'overflow':<9} description")
     for r in rows:
         amax = f"{r['analysed_max']:.6g}" if r["analysed_max"] is not None else "-"
-        op = " [multiplier operand]" if r["multiplier_operand"] else ""
-        print(f"{r['point']:<6} {r['format']:<7} {r['bits']:>4} {r['covers']:>12} {amax:>13} {r['rounding']:<10} "
+        op = " [multiplier operand]" if r["multiplier_operand"] else " [cast]" if r["cast"] else ""
+        print(f"{r['point']:<{width}} {r['format']:<7} {r['bits']:>4} {r['covers']:>12} {amax:>13} {r['rounding']:<10} "
               f"{r['overflow']:<9} {r['description']}{op}")
 
 

@@ -3,8 +3,6 @@ and every variant at once."""
 
 from __future__ import annotations
 
-import sys
-
 import numpy as np
 
 from kfpga.cli import common
@@ -38,11 +36,7 @@ def add_parser(sub):
 
 def _progress(quiet):
     """A callback that shows what is being tried; its ``tick`` counts the candidates."""
-    bar = None
-    if not quiet:
-        from tqdm import tqdm
-
-        bar = tqdm(desc="propose", unit="candidate", file=sys.stderr)
+    bar = None if quiet else common.progress_bar(desc="propose", unit="candidate")
 
     def step(text):
         if bar is not None:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 from kfpga.cli import common
@@ -29,15 +28,13 @@ def _synthesise(args, config):
     """``({"core": ..., "whole_design": ...}, top)``: the estimates of the core and of the whole design."""
     import tempfile
 
-    from tqdm import tqdm
-
     from kfpga.flows.quartus import io_timing
     from kfpga.hw.generate import write_block, write_top
     from kfpga.hw.resources import ecp5_fmax, estimate
 
     results = {}
-    with tempfile.TemporaryDirectory() as tmp, tqdm(total=4 if args.ecp5 else 2, desc="yosys synth_intel",
-                                                     unit="design", file=sys.stderr, disable=args.quiet) as bar:
+    with tempfile.TemporaryDirectory() as tmp, common.progress_bar(args.quiet, total=4 if args.ecp5 else 2,
+                                                                    desc="yosys synth_intel", unit="design") as bar:
         design = {"architecture": args.architecture_chosen, **({} if args.stages is None else {"stages": args.stages})}
         core_v, _ = write_block(Path(tmp) / "core", "core", config, variant=args.variant, channels=args.channels,
                                 **design)

@@ -64,8 +64,6 @@ def _simulate(args, config, pre, params):
     """``(result, failure, wall seconds, build seconds)`` of the co-simulation."""
     import time
 
-    from tqdm import tqdm
-
     from kfpga.sim import system
     from kfpga.sim.runner import SimulationFailed, build, run
 
@@ -81,7 +79,7 @@ def _simulate(args, config, pre, params):
         built = system.build(args.simulator, config=config, variant=args.variant, six=six, channel=args.channel,
                              prefilter=pre, sensors=common.sensors(args), **design)
     build_s = time.perf_counter() - t0
-    bar = tqdm(total=args.samples, desc="co-simulation", unit="sample", file=sys.stderr, disable=args.quiet)
+    bar = common.progress_bar(args.quiet, total=args.samples, desc="co-simulation", unit="sample")
 
     def progress(n):
         bar.update(n - bar.n)

@@ -17,7 +17,10 @@ Two forms are generated from one trace:
 
 Each value also carries the interval its raw integer can take. A write whose input interval
 already fits its format needs no check, and cannot overflow; that is decided once, exactly,
-at trace time.
+at trace time. The intervals also bound every intermediate: when one can pass what int64 holds
+(:data:`INT64_SAFE_BITS`), the vector form runs on numpy arrays of Python ints (``dtype=object``)
+instead, exact at any width and several times slower; the scalar form is exact at any width as
+it is.
 """
 
 from __future__ import annotations
@@ -25,13 +28,19 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 
 from kfpga.core.fixed import Overflow, Rounding, shift_round
 from kfpga.core.ops import Fx, Ops, divide, quotient_bits, square_root
 
-__all__ = ["TraceOps", "FloatTraceOps", "Kernel", "compile_stage", "compile_float_ranges"]
+__all__ = ["TraceOps", "FloatTraceOps", "Kernel", "compile_stage", "compile_float_ranges", "cast_bounds",
+           "INT64_SAFE_BITS"]
+
+#: Magnitude bits an int64 array holds with a bit to spare for a rounding addend: an intermediate
+#: whose interval reaches past ``2**INT64_SAFE_BITS`` takes the vector form onto Python ints.
+INT64_SAFE_BITS = 62
 
 
 def _addend_source(v, shift, rounding):
@@ -65,11 +74,25 @@ class TraceOps(Ops):
         self.lines = []
         self.sites = []  # names of the rq/div sites that can overflow, in order
         self._count = 0
+        self.magnitude = 0  # the largest magnitude any intermediate's interval reaches
+        self.cast_bounds = {}  # a cast point without a format -> the interval (lo, hi) of its exact value
+
+    def _exact_cast(self, a, point):
+        # the value's interval in real units, joined with the point's other uses (another variant's)
+        lo, hi = Fraction(a.raw.lo, 1 << a.frac), Fraction(a.raw.hi, 1 << a.frac)
+        if point in self.cast_bounds:
+            lo, hi = min(lo, self.cast_bounds[point][0]), max(hi, self.cast_bounds[point][1])
+        self.cast_bounds[point] = (lo, hi)
+        return a
+
+    def _reach(self, *bounds):
+        self.magnitude = max(self.magnitude, *(abs(b) for b in bounds))
 
     def _var(self, expr, lo, hi):
         name = f"t{self._count}"
         self._count += 1
         self.lines.append(f"{name} = {expr}")
+        self._reach(lo, hi)
         return _T(name, lo, hi)
 
     def _input(self, raw, fmt, name):
@@ -115,6 +138,7 @@ class TraceOps(Ops):
     def _rq(self, x, src_frac, fmt, name):
         shift = src_frac - fmt.frac_bits
         lo, hi = shift_round(x.lo, shift, fmt.rounding), shift_round(x.hi, shift, fmt.rounding)
+        self._reach(x.lo - (1 << max(shift, 0)), x.hi + (1 << max(shift, 0)))  # with its rounding addend
         if shift > 0:
             add = _addend_source(x.expr, shift, fmt.rounding)
             value = self._var(f"({x.expr}{add}) >> {shift}" if add else f"{x.expr} >> {shift}", lo, hi)
@@ -160,6 +184,8 @@ class TraceOps(Ops):
         qbits = quotient_bits(fmt)
         limit = (1 << qbits) - 1
         site = self._site(name)
+        # |num| << shift is compared with den << qbits
+        self._reach(max(abs(num.lo), abs(num.hi)) << shift, max(abs(den.lo), abs(den.hi)) << qbits)
         q = self._var("0", -limit, limit)
         if self.vector:
             self.lines.append(f"{q.expr}, f{site} = divide({num.expr}, {den.expr}, {shift}, {qbits})")
@@ -177,6 +203,7 @@ class TraceOps(Ops):
     def _sqrt(self, raw, shift, fmt, name):
         limit = fmt.max_raw
         site = self._site(name)
+        self._reach(max(abs(raw.lo), abs(raw.hi)) << max(shift, 0))  # the radicand
         r = self._var("0", 0, limit)
         if self.vector:
             self.lines.append(f"{r.expr}, f{site} = square_root({raw.expr}, {shift}, {limit})")
@@ -224,6 +251,12 @@ class Kernel:
     outputs: tuple  # output names
     sites: tuple  # names of the writes that can overflow, in flag order
     site_points: dict  # each site's quantisation point
+    wide: bool = False  # an intermediate can pass int64: the vector form runs on Python ints
+
+    @property
+    def dtype(self):
+        """The element type of the vector form's arrays."""
+        return object if self.wide else np.int64
 
 
 def compile_stage(update, formats, *, constants, state, inputs, outputs, vector):
@@ -270,7 +303,21 @@ def compile_stage(update, formats, *, constants, state, inputs, outputs, vector)
     namespace = {"np": np, "divide": divide, "square_root": square_root, "isqrt": math.isqrt}
     exec(compile(source, f"<kfpga stage {update.__name__}>", "exec"), namespace)
     return Kernel(source, namespace["kernel"], state_names, input_names, tuple(outputs), sites,
-                  {name: ops.point_of[name] for name in sites})
+                  {name: ops.point_of[name] for name in sites}, ops.magnitude.bit_length() > INT64_SAFE_BITS)
+
+
+def cast_bounds(spec, params, formats, variant, input_format):
+    """``{cast point: (lo, hi)}`` (``Fraction``): the interval of the exact value of every cast point that has
+    no format in ``formats``, from the formats of the state and the inputs (what the default cast
+    formats take their integer bits from: a cast then never overflows)."""
+    v = spec.variants[variant]
+    ops = TraceOps(formats, vector=False)
+    k = ops.constants(v.constants(params))
+    x = {name: ops.input(f"s_{name}", point, name) for name, point in v.state_for(params)}
+    u = {name: Fx(_T(f"u_{name}", input_format.min_raw, input_format.max_raw), input_format.frac_bits, None, input_format,
+                  name) for name, _ in spec.inputs_for(params)}
+    v.update(ops, k, x, u)
+    return ops.cast_bounds
 
 
 class FloatTraceOps(TraceOps):
@@ -309,6 +356,9 @@ class FloatTraceOps(TraceOps):
     def rq(self, a, point, name=None):
         self._record(a.raw, point, name)
         return Fx(a.raw, 0, None, None, name or str(point))
+
+    def cast(self, a, point, name=None):
+        return self.rq(a, point, name)  # every cast point's range, whether it has a format or not
 
     def div(self, num, den, point, name=None):
         q = self._var(f"{num.raw.expr} / {den.raw.expr}", 0, 0)

@@ -5,29 +5,36 @@ One :class:`FilterConfig` drives the bit-accurate model (``kfpga/core/fixedmodel
 and validated at once: a bad value raises :class:`ConfigError` naming the field and the value.
 
 Default formats come from range analysis (``model/ranges.py``) by the rules of
-``kfpga/core/formats.py``. Every format is then checked: against the analysed range, against the
-18-bit multiplier operand rule, and for the widths of every exact intermediate, which the
-filter's own equations give when run on :class:`~kfpga.core.ops.WidthOps`.
+``kfpga/core/formats.py``, within the config's word budget (``max_word``): where an exact sum
+would pass it, the cast points in it get formats of their own. Every format is then checked
+against the analysed range and for the constants and reset values it must hold. No width is
+refused: the model is exact at any width (``kfpga/core/compiled.py``), and so is the RTL.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import inspect
 import tomllib
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
 import numpy as np
 
+from kfpga.core.ads8364 import CODE_FORMAT
 from kfpga.core.board import Board
 from kfpga.core.errors import ConfigError
-from kfpga.core.fixed import INT64_SAFE_BITS, QFormat, bits_for, to_raw
-from kfpga.core.formats import MAX_OPERAND_BITS, MULTIPLIER_BITS, PRECISION, STATE_FRAC_BITS, precision_frac_bits
-from kfpga.core.ops import WidthOps
+from kfpga.core.fixed import QFormat, bits_for, to_raw
+from kfpga.core.formats import MAX_WORD, MULTIPLIER_BITS, PRECISION, STATE_FRAC_BITS, cast_formats, precision_frac_bits
+from kfpga.core.ops import update_widths
 from kfpga.core.spec import Constant
 
-__all__ = ["ConfigError", "FilterConfig", "default_formats", "analysed_ranges", "MULTIPLIER_BITS", "STATE_FRAC_BITS"]
+__all__ = ["ConfigError", "FilterConfig", "default_formats", "analysed_ranges", "input_format", "MULTIPLIER_BITS",
+           "STATE_FRAC_BITS", "MAX_WORD", "EXACT"]
+
+#: What a cast point is pinned to when it must keep its value exact (``format = "exact"``).
+EXACT = "exact"
 
 
 def _registry():
@@ -55,11 +62,28 @@ def analysed_ranges(params, stimulus=None, *, filter=None):
     return spec.ranges(params, np.atleast_2d(np.asarray(stimulus, dtype=np.float64)))
 
 
-def default_formats(params, *, ranges=None, operand_bits=MULTIPLIER_BITS, state_frac=STATE_FRAC_BITS, filter=None):
-    """Formats chosen by range analysis (``kfpga/core/formats.py``)."""
+def input_format(params):
+    """The format of every input: the ADC's signed 16-bit code, or a wider integer where the
+    filter's parameters ask for one (``input_bits``: data that are not an ADC code, such as a
+    latitude in 1e-7 deg; the core alone takes them, the board's ADC cannot)."""
+    bits = getattr(params, "input_bits", CODE_FORMAT.width)
+    return CODE_FORMAT if bits == CODE_FORMAT.width else QFormat(bits, 0)
+
+
+def default_formats(params, *, ranges=None, operand_bits=MULTIPLIER_BITS, state_frac=STATE_FRAC_BITS, filter=None,
+                    max_word=MAX_WORD, pinned=None):
+    """Formats chosen by range analysis (``kfpga/core/formats.py``): every point's, and the cast
+    points' where an exact sum would pass ``max_word`` (``pinned``: formats given for some
+    points, a cast point's may be :data:`EXACT`; they are taken as they are)."""
     spec = _registry().spec_for(params, filter)
     ranges = analysed_ranges(params, filter=spec.name) if ranges is None else ranges
-    return spec.default_formats(params, ranges, operand_bits=operand_bits, state_frac=state_frac)
+    budget = {"max_word": max_word} if "max_word" in inspect.signature(spec.default_formats).parameters else {}
+    formats = spec.default_formats(params, ranges, operand_bits=operand_bits, state_frac=state_frac, **budget)
+    pinned = dict(pinned or {})
+    formats.update({name: fmt for name, fmt in pinned.items() if fmt != EXACT})
+    formats.update(cast_formats(spec, params, formats, ranges, max_word=max_word, input_format=input_format(params),
+                                keep=pinned))
+    return formats
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -79,9 +103,10 @@ class FilterConfig:
     check_ranges:
         Check each format against the analysed range (on by default; word-length sweeps turn
         it off to show what narrow formats do).
-    max_operand_bits:
-        Widest multiplier operand allowed (36: a product of up to 2 x 2 of Cyclone II's 18 x 18
-        embedded multipliers).
+    max_word:
+        The word budget of the default formats (36: a product of up to 2 x 2 of Cyclone II's
+        18 x 18 embedded multipliers): the widest an operand grows for noise, and the widest exact
+        sum before its cast points get formats. A pinned format may pass it (the RTL builds it).
     board:
         The rate and clock the design runs at (:class:`~kfpga.core.board.Board`, ``[board]``).
     """
@@ -90,7 +115,7 @@ class FilterConfig:
     params: object = None
     formats: object = field(default_factory=dict)
     check_ranges: bool = True
-    max_operand_bits: int = MAX_OPERAND_BITS
+    max_word: int = MAX_WORD
     board: Board = field(default_factory=Board)
     #: The points whose formats were given (the rest are defaults), in datapath order.
     pinned: tuple = field(init=False, default=())
@@ -109,27 +134,19 @@ class FilterConfig:
             raise TypeError(f"check_ranges must be a bool, not {self.check_ranges!r}")
         if not isinstance(self.board, Board):
             raise TypeError(f"board must be a Board, not {self.board!r}")
-        if not isinstance(self.max_operand_bits, int) or self.max_operand_bits < 2:
-            raise ValueError(f"max_operand_bits must be an integer >= 2, not {self.max_operand_bits!r}")
+        if not isinstance(self.max_word, int) or isinstance(self.max_word, bool) or self.max_word < 2:
+            raise ConfigError(f"formats.max_word must be an integer >= 2 (bits), not {self.max_word!r}")
         given = dict(self.formats)
         names = list(spec.points_for(self.params))
-        for name, fmt in given.items():
-            if name not in spec.points:
-                raise ConfigError(f"formats.{name}: unknown quantisation point; known: {', '.join(spec.points)}")
-            if name not in names:
-                raise ConfigError(f"formats.{name}: this {spec.name} model has no point {name} "
-                                  f"({spec.points[name].description})")
-            if not isinstance(fmt, QFormat):
-                raise ConfigError(f"formats.{name} must be a QFormat, not {fmt!r}")
+        _check_given(spec, names, given)
         try:
-            merged = default_formats(self.params, filter=spec.name)
+            merged = default_formats(self.params, filter=spec.name, max_word=self.max_word, pinned=given)
         except ConfigError:
             raise
         except (ArithmeticError, ValueError) as exc:  # numbers no format or float iteration can hold
             raise ConfigError(f"the model's numbers are out of reach of its default formats ({exc}); bring "
                               "Q, R, P0 and T closer to the sizes of the ADC codes they describe") from None
-        merged.update(given)
-        object.__setattr__(self, "formats", MappingProxyType({name: merged[name] for name in names}))
+        object.__setattr__(self, "formats", MappingProxyType({name: merged[name] for name in names if name in merged}))
         object.__setattr__(self, "pinned", tuple(name for name in names if name in given))
         self._validate_formats()
 
@@ -145,13 +162,15 @@ class FilterConfig:
     # -- the model's interface ----------------------------------------------------------
     @property
     def input_format(self):
-        """The format of every input: the ADC's signed 16-bit code, or a wider integer where the
-        filter's parameters ask for one (``input_bits``: data that are not an ADC code, such as a
-        latitude in 1e-7 deg; the core alone takes them, the board's ADC cannot)."""
-        from kfpga.core.ads8364 import CODE_FORMAT
+        """The format of every input (:func:`input_format`)."""
+        return input_format(self.params)
 
-        bits = getattr(self.params, "input_bits", CODE_FORMAT.width)
-        return CODE_FORMAT if bits == CODE_FORMAT.width else QFormat(bits, 0)
+    @property
+    def casts(self):
+        """The cast points of this model (a product's or a sum's own result format), in datapath
+        order: ``{name: QFormat, or None where the value stays exact}``."""
+        points = self.spec.points
+        return {name: self.formats.get(name) for name in self.spec.points_for(self.params) if points[name].cast}
 
     @property
     def inputs(self):
@@ -221,59 +240,26 @@ class FilterConfig:
                         f"{bits_for(reach, fmt.frac_bits)} integer bits"
                     )
         spec.validate(self)
-        # a variant whose intermediates are too wide with the defaults alone is refused when it is
-        # asked for (require_variant), not when the config is made: another variant may run
-        deferred = {}
         for variant in spec.variants:
             if spec.variants[variant].applies(self.params) is None:
-                try:
-                    self._check_widths(variant)
-                except ConfigError as exc:
-                    if set(getattr(exc, "points", ())) & set(self.pinned) or not hasattr(exc, "points"):
-                        raise
-                    deferred[variant] = ConfigError(
-                        f"the {variant} variant of this model needs wider sums than its default formats allow: {exc} "
-                        "(its constants and settled covariance need those fraction bits); "
-                        + ("another variant runs it" if len(spec.variants) > 1 else "pin narrower formats"))
-        object.__setattr__(self, "_deferred", deferred)
+                self._check_widths(variant)
 
     def width_report(self, variant):
         """What :class:`~kfpga.core.ops.WidthOps` finds in the update of ``variant``."""
-        v = self.spec.variants[variant]
-        ops = WidthOps(self.formats)
-        k = ops.constants(v.constants(self.params))
-        x = {name: ops.input(None, point, name) for name, point in v.state_for(self.params)}
-        u = {name: ops.input(None, self.input_format, name) for name in self.inputs}
-        v.update(ops, k, x, u)
-        return ops.report
+        return update_widths(self.spec, self.params, self.formats, variant, self.input_format)
 
     def _check_widths(self, variant):
-        f = self.formats
+        """Formats the update cannot be built with (a division whose dividend would not be an exact
+        integer): the widths themselves are never refused."""
         try:
-            report = self.width_report(variant)
+            self.width_report(variant)
         except ValueError as exc:
             raise ConfigError(f"formats: {exc}") from None
-        for text, wa, wb, pa, pb in report.multipliers:
-            for width, points in ((wa, pa), (wb, pb)):
-                if width > self.max_operand_bits:
-                    if len(points) == 1 and next(iter(points)) in f:
-                        name = next(iter(points))
-                        raise _located(ConfigError(
-                            f"formats.{name} = {f[name]} is {width} bits wide, but it feeds a multiplier, whose "
-                            f"operands are at most {self.max_operand_bits} bits ({_blocks(self.max_operand_bits)})"),
-                            points)
-                    raise _located(ConfigError(f"the product {text} has a {width}-bit operand; multiplier operands "
-                                               f"are at most {self.max_operand_bits} bits "
-                                               f"({_blocks(self.max_operand_bits)})"), points)
-        wide = report.too_wide(INT64_SAFE_BITS)
-        if wide is not None:
-            points = sorted(n for n in wide.points if n in f)
-            involved = ", ".join(f"formats.{n} = {f[n]}" for n in points)
-            what = f"{wide.into} = {wide.text}" if wide.into else wide.text
-            raise _located(ConfigError(
-                f"the {wide.kind} {what} is {wide.width} bits wide with {involved}; sums and products must stay "
-                f"within {INT64_SAFE_BITS} bits to be held exactly: narrow these formats"
-            ), points)
+
+    def over_budget(self, variant):
+        """The intermediates of ``variant``'s update wider than the word budget, widest first (the
+        datapath builds them; the report shows them)."""
+        return self.width_report(variant).past(self.max_word)
 
     def require_variant(self, variant):
         """Refuse a variant the filter does not have, or that these parameters cannot use."""
@@ -284,8 +270,6 @@ class FilterConfig:
         why = spec.variants[variant].applies(self.params)
         if why:
             raise ConfigError(why)
-        if variant in self._deferred:
-            raise self._deferred[variant]
         if self.check_ranges:
             self._check_precision(variant)
 
@@ -311,12 +295,6 @@ class FilterConfig:
             what = label if label.startswith(("the reset", "the settled")) else "the constant " + label
             how = (f"rounds to 0 in formats.{point} = {fmt} (LSB {fmt.lsb:.3g})" if raw == 0 else
                    f"is held as {held:.4g} in formats.{point} = {fmt}, {100 * error:.2g} % off")
-            if point not in self.pinned:  # the default already has every bit a format may take
-                raise ConfigError(f"the {variant} variant of this model needs wider sums than its default formats "
-                                  f"allow: {what} = {value:.4g} needs {need} fraction bits in formats.{point} = {fmt}, "
-                                  f"more than a multiplier operand of {self.max_operand_bits} bits leaves (its "
-                                  "values span too wide a range); "
-                                  + ("another variant runs it" if len(self.spec.variants) > 1 else "pin other formats"))
             raise ConfigError(f"{what} = {value:.4g} {how}: {point} needs at least {need} fraction bits to hold it "
                               f"within {100 * PRECISION:g} % ({variant} variant)")
 
@@ -365,11 +343,14 @@ class FilterConfig:
         except KeyError as exc:
             raise ConfigError(f"{source}: filter.name: {exc.args[0]}") from None
         params = params_from_dict(spec, _table(data, "model", source), source)
-        formats = {}
+        formats, budget = {}, {}
         for point, value in _table(data, "formats", source).items():
-            formats[point] = format_from_toml(point, value)
+            if point == "max_word":
+                budget["max_word"] = value
+            else:
+                formats[point] = format_from_toml(point, value)
         return cls(filter=spec.name, params=params, formats=formats, check_ranges=check_ranges,
-                   board=board_from_dict(_table(data, "board", source), source))
+                   board=board_from_dict(_table(data, "board", source), source), **budget)
 
     def to_toml(self, *, formats=True):
         """The config as TOML text; ``formats=False`` writes the default formats commented out
@@ -396,25 +377,39 @@ class FilterConfig:
             if self.board.sample_rate_hz is not None:
                 lines.append(f"sample_rate_hz = {_toml_value(self.board.sample_rate_hz)}")
             lines.append(f"clock_hz = {_toml_value(self.board.clock_hz)}")
+        lines += ["", "[formats]", f"max_word = {self.max_word}  # the word budget of the default formats (bits)"]
         if not formats:
             lines += ["", "# The formats below are the defaults for these parameters (uncomment one to pin it), or"
                           " the ones this config pins."]
-        for name, fmt in self.formats.items():
+        for name in spec.points_for(self.params):
+            fmt = self.formats.get(name)
+            if fmt is None and name not in self.pinned:
+                continue  # a cast point that keeps its value exact by default
             mark = "" if formats or name in self.pinned else "# "
-            lines += [
-                "",
-                f"{mark}[formats.{name}]  # {spec.points[name].description}",
-                f'{mark}format = "{fmt}"',
-                f'{mark}rounding = "{fmt.rounding.value}"',
-                f'{mark}overflow = "{fmt.overflow.value}"',
-            ]
+            lines += ["", f"{mark}[formats.{name}]  # {spec.points[name].description}"]
+            if fmt is None:
+                lines.append(f'{mark}format = "{EXACT}"')
+                continue
+            lines += [f'{mark}format = "{fmt}"', f'{mark}rounding = "{fmt.rounding.value}"',
+                      f'{mark}overflow = "{fmt.overflow.value}"']
         return "\n".join(lines) + "\n"
 
 
-def _located(exc, points):
-    """``exc`` with the points its formats come from (``exc.points``)."""
-    exc.points = tuple(points)
-    return exc
+def _check_given(spec, names, given):
+    """Refuse a given format for a point the model does not have, or that is not a format."""
+    for name, fmt in given.items():
+        if name not in spec.points:
+            known = [n for n in names if not spec.points[n].cast]
+            casts = "" if len(known) == len(names) else " and its cast points (kfpga formats lists them)"
+            raise ConfigError(f"formats.{name}: unknown quantisation point; this model has {', '.join(known)}{casts}")
+        if name not in names:
+            raise ConfigError(f"formats.{name}: this {spec.name} model has no point {name} "
+                              f"({spec.points[name].description})")
+        if fmt == EXACT and not spec.points[name].cast:
+            raise ConfigError(f"formats.{name} = \"exact\": only a cast point (a product's or a sum's own format) "
+                              f"can keep its value exact; {name} is a {spec.points[name].role}")
+        if not isinstance(fmt, QFormat) and fmt != EXACT:
+            raise ConfigError(f"formats.{name} must be a QFormat, not {fmt!r}")
 
 
 def board_from_dict(table, source="config"):
@@ -427,12 +422,6 @@ def board_from_dict(table, source="config"):
         return Board(**table)
     except ValueError as exc:
         raise ConfigError(f"{source}: {exc}") from None
-
-
-def _blocks(bits):
-    pieces = -(-bits // MULTIPLIER_BITS)
-    return (f"one Cyclone II {MULTIPLIER_BITS}x{MULTIPLIER_BITS} embedded multiplier" if pieces == 1 else
-            f"{pieces} x {pieces} of Cyclone II's {MULTIPLIER_BITS}x{MULTIPLIER_BITS} embedded multipliers")
 
 
 def _table(data, name, source):
@@ -465,7 +454,8 @@ def params_from_dict(spec, model, source="config"):
 
 
 def format_from_toml(name, spec):
-    """A format from ``"Q18.8"`` or a table ``{format | int_bits + frac_bits, rounding, overflow}``.
+    """A format from ``"Q18.8"`` or a table ``{format | int_bits + frac_bits, rounding, overflow}``;
+    :data:`EXACT` (``"exact"``, or ``format = "exact"``) for a cast point that keeps its value exact.
 
     Omitted rules keep the defaults (``nearest``, ``saturate``).
     """
@@ -473,6 +463,10 @@ def format_from_toml(name, spec):
 
     if isinstance(spec, str):
         spec = {"format": spec}
+    if isinstance(spec, dict) and spec.get("format") == EXACT:
+        if set(spec) != {"format"}:
+            raise ConfigError(f"formats.{name}: an exact cast has no {', '.join(sorted(set(spec) - {'format'}))}")
+        return EXACT
     if not isinstance(spec, dict):
         raise ConfigError(f"formats.{name} must be a string like \"Q18.8\" or a table, not {spec!r}")
     unknown = set(spec) - {"format", "int_bits", "frac_bits", "rounding", "overflow"}

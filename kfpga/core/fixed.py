@@ -9,7 +9,8 @@ fit. :func:`requantize` applies both to exact integers; ``hw/arith.py`` builds t
 operation in Amaranth and ``kfpga/core/compiled.py`` writes it into the model's compiled loops, so
 the model and the RTL produce identical integers.
 
-The functions accept Python ``int`` (arbitrary precision) or numpy ``int64`` arrays. They are
+The functions accept Python ``int`` (arbitrary precision), numpy ``int64`` arrays, or numpy arrays
+of Python ints (``dtype=object``: a batch whose intermediates pass int64). They are
 written with shifts and compares instead of ``np.round`` (ties to even) or fxpmath (2000x
 slower in a sample loop) so that the rounding is exactly the hardware's: every rule adds a
 constant below one LSB (:func:`round_addend`, which for some rules depends on the sign or on the
@@ -25,11 +26,6 @@ from enum import StrEnum
 import numpy as np
 
 __all__ = ["Rounding", "Overflow", "QFormat", "round_addend", "shift_round", "requantize", "to_raw", "bits_for"]
-
-# numpy int64 holds every intermediate exactly as long as it stays below 2**62 in magnitude
-# (one bit of margin for the rounding add); config validation enforces this bound.
-INT64_SAFE_BITS = 62
-
 
 class Rounding(StrEnum):
     """How fraction bits are dropped, named as MATLAB's fixed-point tools name them.

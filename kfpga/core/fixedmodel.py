@@ -2,7 +2,8 @@
 
 :class:`FixedModel` runs a variant's update function (``kfpga/core/spec.py``), traced once per config
 into a compiled sample loop (``kfpga/core/compiled.py``): the scalar form for one channel, the numpy
-form for a batch of channels. :meth:`FixedModel.run_ops` runs the same update through
+form for a batch of channels (on int64 arrays, or on arrays of Python ints where an intermediate
+can pass int64: exact at any width either way). :meth:`FixedModel.run_ops` runs the same update through
 :class:`~kfpga.core.ops.IntOps` directly, sample by sample, and :meth:`FixedModel.run_exact` through
 exact rationals (:class:`~kfpga.core.ops.FractionOps`); the tests hold all of them equal.
 """
@@ -61,6 +62,17 @@ class ModelResult:
             raise AttributeError(name) from None
 
 
+def _array(values, dtype):
+    """``values`` (ints, int64 or Python-int arrays) as an array of ``dtype``."""
+    a = np.asarray(values)
+    return a.astype(dtype) if a.dtype != dtype else a
+
+
+def _narrow(a, width):
+    """``a`` as int64 when values of ``width`` bits fit it, else as Python ints (``dtype=object``)."""
+    return a.astype(np.int64) if width <= 63 else a.astype(object)
+
+
 class FixedModel:
     """The bit-accurate filter of one variant for one config.
 
@@ -99,7 +111,9 @@ class FixedModel:
         """The state after reset, for one channel or a batch."""
         if batch_shape == ():
             return ModelState(MappingProxyType(dict(self.reset)), False)
-        values = {n: np.full(batch_shape, v, dtype=np.int64) for n, v in self.reset.items()}
+        points = dict(self.state)
+        values = {n: _narrow(np.full(batch_shape, v, dtype=object), self.config.point_format(points[n]).width)
+                  for n, v in self.reset.items()}
         return ModelState(MappingProxyType(values), np.zeros(batch_shape, dtype=bool))
 
     def _codes(self, y):
@@ -146,7 +160,8 @@ class FixedModel:
             columns = [codes[name].tolist() for name in self.inputs]
             ys = columns[0] if len(columns) == 1 else list(zip(*columns, strict=True))
             final = k.function(ys, *regs, *outs, *(s.append for s in sites))
-            arrays = [np.array(o, dtype=np.int64) for o in outs]
+            arrays = [np.array(o, dtype=np.int64 if self.output_format(name).width <= 63 else object)
+                      for o, name in zip(outs, self.outputs, strict=True)]
             flags = []
             for hits in sites:
                 f = np.zeros(n, dtype=bool)
@@ -155,10 +170,14 @@ class FixedModel:
         else:
             # time first while running: each step then writes contiguous rows
             k = self.kernel(True)
-            arrays = [np.empty((n, *batch), dtype=np.int64) for _ in self.outputs]
+            arrays = [np.empty((n, *batch), dtype=k.dtype) for _ in self.outputs]
             flags = [np.zeros((n, *batch), dtype=bool) for _ in k.sites]
-            ys = [np.moveaxis(codes[name], -1, 0) for name in self.inputs]
-            final = k.function(ys, *(np.asarray(r, dtype=np.int64) for r in regs), *arrays, *flags)
+            ys = [np.moveaxis(codes[name], -1, 0).astype(k.dtype) for name in self.inputs]
+            final = k.function(ys, *(_array(r, k.dtype) for r in regs), *arrays, *flags)
+            if k.wide:
+                arrays = [_narrow(a, self.output_format(name).width) for a, name in zip(arrays, self.outputs, strict=True)]
+                final = [_narrow(np.asarray(v, dtype=object), self.config.point_format(point).width)
+                         for v, (_, point) in zip(final, self.state, strict=True)]
         overflow = np.zeros((n, *batch), dtype=bool)
         for f in flags:
             overflow |= f
@@ -197,6 +216,9 @@ class FixedModel:
         state = self.initial_state(first.shape[:-1]) if state is None else state
         points = dict(self.state)
         x = dict(state.values)
+        if first.ndim > 1:  # a batch on Python ints: the direct backend is exact at any width too
+            codes = {name: a.astype(object) for name, a in codes.items()}
+            x = {name: np.asarray(v).astype(object) for name, v in x.items()}
         outs = {name: [] for name in self.outputs}
         overflow = []
         for t in range(first.shape[-1]):
@@ -209,7 +231,11 @@ class FixedModel:
             for name in self.outputs:
                 outs[name].append(raw_of(ops, o[name]))
             overflow.append(ops.overflow())
-        arrays = {name: np.moveaxis(np.array(v, dtype=np.int64), 0, -1) for name, v in outs.items()}
+        arrays = {name: np.moveaxis(_narrow(np.array(v, dtype=object), self.output_format(name).width), 0, -1)
+                  for name, v in outs.items()}
+        if first.ndim > 1:
+            x = {name: _narrow(np.asarray(v, dtype=object), self.config.point_format(points[name]).width)
+                 for name, v in x.items()}
         ovf = np.moveaxis(np.array(overflow, dtype=bool), 0, -1)
         sticky = np.logical_or.accumulate(ovf, axis=-1) | np.asarray(state.sticky, dtype=bool)[..., None]
         end = ModelState(MappingProxyType(x), sticky[..., -1].copy())

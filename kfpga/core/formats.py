@@ -14,9 +14,16 @@
   grows past the multiplier width when it must (each product takes more multiplier pieces).
 * Precision: every constant and reset value of the variants that apply is held within
   :data:`PRECISION` (1 %) by its default format. A register gets the fraction bits that takes;
-  an operand first gives up its guard bit for them, then grows past the multiplier width (up to
-  :data:`MAX_OPERAND_BITS`; each product then takes more multiplier pieces). A format the user
-  pins is checked instead, and refused naming the point and the bits it needs.
+  an operand first gives up its guard bit for them, then grows past the multiplier width (each
+  product then takes more multiplier pieces), past the word budget too if it must. A format the
+  user pins is checked instead, and refused naming the point and the bits it needs.
+* The word budget (``max_word``, :data:`MAX_WORD` = 36 bits by default, two 18-bit multiplier
+  pieces): what the noise rules above may grow an operand to. Where an exact sum or product of
+  the update would be wider, each cast point in it (:meth:`~kfpga.core.ops.Ops.cast`: a product a
+  filter lets be rounded before it enters a sum) gets a format (:func:`cast_formats`): its
+  analysed range plus a guard bit, and :data:`CAST_GUARD` more fraction bits than the point its
+  sum is written into, within the budget. Nothing is refused for width: a wider value stays
+  exact, in the model and in the RTL.
 * A point that holds only constants (an entry of F, 1/T) is an operand as above, with at least
   the fraction bits that leave its smallest constant :data:`CONSTANT_BITS` significant bits,
   whatever its size (0.01 and 5e-5 alike). A constant costs its significant bits only (its
@@ -29,19 +36,25 @@ All defaults round ``nearest`` (ties toward +inf) and ``saturate``.
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 
 from kfpga.core.fixed import QFormat, Rounding, bits_for, to_raw
 
-__all__ = ["MULTIPLIER_BITS", "MAX_OPERAND_BITS", "STATE_FRAC_BITS", "GUARD_BITS", "PRECISION", "register_formats",
+__all__ = ["MULTIPLIER_BITS", "MAX_WORD", "CAST_GUARD", "cast_formats",
+           "STATE_FRAC_BITS", "GUARD_BITS", "PRECISION", "register_formats",
            "precision_frac_bits", "precision_needs", "noise_frac_bits", "noise_step_frac", "constant_frac_bits",
            "significant_bits", "constant_values", "COVARIANCE_GUARD", "covariance_frac"]
 
 #: Cyclone II embedded multiplier operand width (Cyclone II Device Handbook, vol. 1, "Embedded
 #: Multipliers": 18x18 or two 9x9 per block).
 MULTIPLIER_BITS = 18
-#: Widest operand of a product: up to 2 x 2 embedded multipliers make one product (the synthesis
-#: tools split it into 18 x 18 pieces and add them; the resource report counts every piece).
-MAX_OPERAND_BITS = 2 * MULTIPLIER_BITS
+#: The default word budget (``[formats] max_word``): two 18-bit multiplier pieces. The widest an
+#: operand grows for noise, and the widest exact sum or product before its cast points get formats
+#: (the synthesis tools split a wider product into 18 x 18 pieces; the resource report counts each).
+MAX_WORD = 2 * MULTIPLIER_BITS
+#: Fraction bits a cast gets beyond the point its sum is written into: the roundings of up to
+#: eight terms then add at most a quarter of that point's LSB (rms far less).
+CAST_GUARD = 4
 #: Default fraction bits of registers that are not multiplier operands.
 STATE_FRAC_BITS = 8
 GUARD_BITS = 1
@@ -54,11 +67,14 @@ PRECISION = 0.01
 COVARIANCE_GUARD = 3
 
 
-def covariance_frac(fmt):
-    """The fraction bits of a predicted covariance operand ``fmt`` with :data:`COVARIANCE_GUARD`."""
+def covariance_frac(fmt, max_word=MAX_WORD):
+    """The fraction bits of a predicted covariance operand ``fmt`` with :data:`COVARIANCE_GUARD`
+    (within the word budget; never fewer than it has)."""
     if fmt.width <= MULTIPLIER_BITS:
         return fmt.frac_bits
-    return min(fmt.frac_bits + COVARIANCE_GUARD, MAX_OPERAND_BITS - fmt.int_bits)
+    if fmt.width >= max_word:  # past the budget already, for the precision its values need: so is the guard
+        return fmt.frac_bits + COVARIANCE_GUARD
+    return min(fmt.frac_bits + COVARIANCE_GUARD, max_word - fmt.int_bits)
 
 
 #: Significant bits every constant keeps at least by default: as many as the multiplier's operand
@@ -144,7 +160,7 @@ def noise_step_frac(sigma, budget=PRECISION):
     return max(0, math.ceil(-math.log2(limit))) if limit > 0 else 0
 
 
-def _operand_format(point, reach, guard, precise, noisy, constants, operand_bits):
+def _operand_format(point, reach, guard, precise, noisy, constants, operand_bits, max_word):
     """A multiplier operand's default format (the rules of the module docstring)."""
     if point.constant and constants:
         # the operand's fraction bits, more if its smallest constant would keep fewer than
@@ -159,21 +175,23 @@ def _operand_format(point, reach, guard, precise, noisy, constants, operand_bits
         g = 0  # no room: keep the fraction bits, let saturation (flagged) cover the rest
     i = need + g
     frac = max(operand_bits - i, 0)
-    grow = max(noisy, precise)
-    if grow > frac:
-        frac = min(grow, MAX_OPERAND_BITS - i)  # more multiplier pieces per product
+    if max(noisy, precise) > frac:
+        # more multiplier pieces per product: for noise within the word budget, for precision
+        # (the model itself: its constants, reset and settled values) past it if it must
+        frac = max(min(noisy, max_word - i), precise, frac)
     return QFormat(i, frac, Rounding.NEAREST)
 
 
 def register_formats(spec, params, ranges, *, operand_bits=MULTIPLIER_BITS, state_frac=STATE_FRAC_BITS,
-                     noise=None):
-    """``{point: QFormat}`` for the points of ``spec`` that ``params`` uses, by the rules above.
+                     noise=None, max_word=MAX_WORD):
+    """``{point: QFormat}`` for the points of ``spec`` that ``params`` uses, by the rules above
+    (the cast points left out: :func:`cast_formats` gives them theirs).
 
     ``noise``: ``{register point: rms error of the float filter there}``; such a register also
     gets the fraction bits whose rounding adds at most 1 % to that error (:func:`noise_step_frac`).
     """
-    names = list(spec.points_for(params))
     points = spec.points
+    names = [name for name in spec.points_for(params) if not points[name].cast]
     formats = {}
     guard = {name: 0 if points[name].constant else GUARD_BITS for name in names}
     sharers = {name: [n for n in names if points[n].same_as == name] for name in names}
@@ -193,7 +211,7 @@ def register_formats(spec, params, ranges, *, operand_bits=MULTIPLIER_BITS, stat
         point = points[name]
         if point.operand and point.same_as is None:
             formats[name] = _operand_format(point, reach[name], guard[name], precise[name], noisy.get(name, 0),
-                                            constants.get(name, ()), operand_bits)
+                                            constants.get(name, ()), operand_bits, max_word)
     for name in names:
         point = points[name]
         if point.operand or point.same_as is not None:
@@ -208,3 +226,53 @@ def register_formats(spec, params, ranges, *, operand_bits=MULTIPLIER_BITS, stat
         if points[name].same_as is not None:
             formats[name] = formats[points[name].same_as]
     return {name: formats[name] for name in names}
+
+
+def _cast_format(exact, bounds, max_word):
+    """The default format of a cast point: ``exact`` its :class:`~kfpga.core.ops.ExactCast`, ``bounds``
+    the interval of its exact value (the rules of the module docstring: it never overflows)."""
+    target = exact.into_format.frac_bits if exact.into_format is not None else exact.frac
+    frac = max(0, min(exact.frac, target + CAST_GUARD))
+
+    def int_bits(frac):  # the bits the interval takes once rounded to ``frac`` (nearest: half an LSB more)
+        reach = max(abs(bounds[0]), abs(bounds[1])) + Fraction(1, 1 << (frac + 1))
+        return next(i for i in range(1, 4096) if QFormat(i, frac).max_raw >= reach * (1 << frac))
+
+    i = int_bits(frac)
+    if i + frac > max_word:
+        frac = max(0, min(exact.frac, target), max_word - i)  # the guard gives way first, never the target's bits
+        i = int_bits(frac)
+    return QFormat(i, frac, Rounding.NEAREST)
+
+
+def cast_formats(spec, params, formats, ranges, *, max_word=MAX_WORD, input_format, keep=()):
+    """``{cast point: QFormat}`` for the cast points that an exact sum or product wider than
+    ``max_word`` holds, in any variant that applies (``formats``: every other point's; ``keep``: the
+    cast points the config pins, with a format or exact, which this leaves as they are). Its
+    integer bits cover every value the formats before it can give (``ranges`` is not needed:
+    a cast is a rounding inside a sum, and never saturates).
+
+    A cast narrows the sum it enters, which may narrow the sums after it: the update is measured
+    again with the casts so far until no wide intermediate holds an exact cast point.
+    """
+    from kfpga.core.compiled import cast_bounds
+    from kfpga.core.ops import update_widths
+
+    casts = {}
+    variants = [name for name, v in spec.variants.items() if v.applies(params) is None]
+    for _ in range(len(spec.points) + 1):
+        wanted, bounds = {}, {}
+        for variant in variants:
+            current = {**formats, **casts}
+            report = update_widths(spec, params, current, variant, input_format)
+            for wide in report.past(max_word):
+                for point in wide.casts - set(casts) - set(keep):
+                    if report.exact_casts[point].into is not None:  # else nothing writes it: not built
+                        wanted.setdefault(point, report.exact_casts[point])
+            for point, (lo, hi) in cast_bounds(spec, params, current, variant, input_format).items():
+                old = bounds.get(point, (lo, hi))
+                bounds[point] = (min(lo, old[0]), max(hi, old[1]))
+        if not wanted:
+            break
+        casts.update({point: _cast_format(exact, bounds[point], max_word) for point, exact in sorted(wanted.items())})
+    return casts

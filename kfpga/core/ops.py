@@ -9,7 +9,10 @@ Values are :class:`Fx`: a backend payload and its binary point (``frac``: the pa
 for ``raw * 2**-frac``). ``add``, ``sub``, ``neg``, ``mul``, ``shift``, ``abs``, ``select``, ``min``,
 ``max`` and ``sort2`` (a compare-exchange) are exact, ``gt`` gives a condition; ``rq``
 writes a value into the format of a quantisation point (the one place where bits are dropped,
-with the point's rounding and overflow rules, raising an overflow flag); ``div`` is the
+with the point's rounding and overflow rules, raising an overflow flag); ``cast`` is an ``rq``
+into a *cast point* (a product's or a sum's own result format, as MATLAB's fimath
+``SpecifyPrecision`` gives one) when the config gives that point a format, and the exact value
+when it does not; ``div`` is the
 restoring divider of the time-varying filters and ``sqrt`` the restoring square root of the
 square-root covariance forms. The rules every backend shares live here, in
 :class:`Ops`, once:
@@ -26,7 +29,7 @@ Backends (this module; the Amaranth one is ``hw/arith.py``, the compiled fast pa
 :class:`FloatOps`   float64 values with real constants and no rounding; records every point's
                     largest magnitude (the range analysis)
 :class:`WidthOps`   the exact width of every intermediate as the RTL builds it, multiplier
-                    count and operand widths, the int64 bound
+                    count and operand widths, the cast points that stay exact
 :class:`FractionOps`  exact rationals rounded once per point: the spec the integer model is
                     tested against, sharing no shift or rounding code with it
 ==================  ==========================================================================
@@ -40,9 +43,10 @@ from fractions import Fraction
 
 import numpy as np
 
-from kfpga.core.fixed import INT64_SAFE_BITS, Overflow, QFormat, Rounding, requantize, to_raw
+from kfpga.core.fixed import Overflow, QFormat, Rounding, requantize, to_raw
 
-__all__ = ["Fx", "Ops", "IntOps", "FloatOps", "WidthOps", "FractionOps", "CostOps", "update_cost", "Intermediate", "divider_shift",
+__all__ = ["Fx", "Ops", "IntOps", "FloatOps", "WidthOps", "FractionOps", "CostOps", "update_cost", "Intermediate",
+           "ExactCast", "WidthReport", "update_widths", "divider_shift",
            "const_width",
            "quantise_fraction", "quotient_bits", "divide", "root_shift", "square_root"]
 
@@ -224,6 +228,19 @@ class Ops:
         return Fx(self._mux(swap, rb, ra), frac), Fx(self._mux(swap, ra, rb), frac)
 
     # -- quantisation ------------------------------------------------------------------------
+    def cast(self, a, point, name=None):
+        """``a`` written into the cast point ``point`` (as :meth:`rq`) when the config gives it a
+        format, else ``a`` itself, exact: a product's or a sum's own result format, which a filter
+        states where one may help (a product before it enters a sum) and the config sets where
+        the exact width would pass the word budget (``kfpga/core/formats.py``)."""
+        if isinstance(point, str) and point not in self.formats:
+            return self._exact_cast(a, point)
+        return self.rq(a, point, name)
+
+    def _exact_cast(self, a, point):
+        """A cast point without a format: the value itself (a backend may note it)."""
+        return a
+
     def rq(self, a, point, name=None):
         """Write ``a`` into the format of ``point``: its rounding, its overflow rule, a flag."""
         fmt = self.fmt(point)
@@ -339,14 +356,16 @@ def _fold(a, b, frac, op):
 
 
 def divide(num, den, shift, quotient_bits):
-    """The restoring divider on integers: ``(quotient, overflowed)``; ints or int64 arrays.
+    """The restoring divider on integers: ``(quotient, overflowed)``; ints, int64 arrays, or arrays
+    of Python ints (``dtype=object``, a batch past int64).
 
     ``floor(|num| * 2**shift / den)`` with the sign of ``num``; ``2**quotient_bits - 1`` (and the
     flag) when that does not fit in ``quotient_bits`` bits or ``den <= 0``.
     """
     limit = (1 << quotient_bits) - 1
     if isinstance(num, np.ndarray) or isinstance(den, np.ndarray):
-        num, den = np.broadcast_arrays(np.asarray(num, dtype=np.int64), np.asarray(den, dtype=np.int64))
+        dtype = _dtype(num, den)
+        num, den = np.broadcast_arrays(np.asarray(num, dtype=dtype), np.asarray(den, dtype=dtype))
         mag = np.abs(num) << shift
         bad = (den <= 0) | (mag >= (np.maximum(den, 1) << quotient_bits))
         quo = np.where(bad, limit, mag // np.maximum(den, 1))
@@ -359,13 +378,25 @@ def divide(num, den, shift, quotient_bits):
     return (-quo if num < 0 else quo), bad
 
 
+def _dtype(*values):
+    """``object`` when any of ``values`` is an array of Python ints (a batch past int64), else int64."""
+    return object if any(isinstance(v, np.ndarray) and v.dtype == object for v in values) else np.int64
+
+
 def square_root(raw, shift, limit):
-    """The restoring square root on integers: ``(root, flag)``; ints or int64 arrays.
+    """The restoring square root on integers: ``(root, flag)``; ints, int64 arrays or arrays of
+    Python ints.
 
     ``floor(sqrt(raw * 2**shift))`` (a negative ``shift`` drops bits first, by a floor shift:
     the floor of the root of a floor is the floor of the root); ``limit`` and the flag when the
     root is above ``limit``; 0 and the flag for a negative ``raw``.
     """
+    if isinstance(raw, np.ndarray) and raw.dtype == object:  # Python ints: exact at any width
+        rad = [max(int(v), 0) for v in raw.ravel()]
+        rad = [v << shift if shift >= 0 else v >> -shift for v in rad]
+        root = np.array([math.isqrt(v) for v in rad], dtype=object).reshape(raw.shape)
+        bad = (raw < 0) | (root > limit)
+        return np.where(raw < 0, 0, np.minimum(root, limit)), bad
     if isinstance(raw, np.ndarray):
         raw = np.asarray(raw, dtype=np.int64)
         rad = np.maximum(raw, 0)
@@ -435,6 +466,9 @@ class FloatOps(Ops):
             self.record(name, a.raw)
         return Fx(a.raw, 0, None, None, name or _label(point))
 
+    def cast(self, a, point, name=None):
+        return self.rq(a, point, name)  # no rounding in float: the range of the point is recorded
+
     def div(self, num, den, point, name=None):
         return self.rq(Fx(num.raw / den.raw, 0), point, name)
 
@@ -468,6 +502,7 @@ class Intermediate:
     points: frozenset  # quantisation points whose formats set it
     kind: str  # "sum", "product", "shift", "dividend", "radicand", "comparison"
     into: str | None = None  # the point it is written to, when known
+    casts: frozenset = frozenset()  # the cast points in it that keep their value exact (no format)
 
 
 @dataclass
@@ -475,6 +510,19 @@ class _W:
     width: int
     text: str
     points: frozenset
+    casts: frozenset = frozenset()  # exact cast points the value holds
+    deps: frozenset = frozenset()  # the intermediates (indices) it is made of, its own included
+
+
+@dataclass(frozen=True)
+class ExactCast:
+    """A cast point that keeps its value exact: the width and fraction bits it has there, and the
+    point (with its format) whose write first consumes it."""
+
+    width: int
+    frac: int
+    into: str | None = None
+    into_format: QFormat | None = None
 
 
 @dataclass
@@ -484,6 +532,8 @@ class WidthReport:
     intermediates: list = field(default_factory=list)
     multipliers: list = field(default_factory=list)  # (text, width a, width b, points a, points b)
     writes: list = field(default_factory=list)  # (point, source width, format)
+    exact_casts: dict = field(default_factory=dict)  # cast point -> ExactCast
+    live: set = field(default_factory=set)  # the intermediates a write, an output or a next state reads
 
     @property
     def multiplier_count(self):
@@ -506,9 +556,11 @@ class WidthReport:
     def widest(self):
         return max(self.intermediates, key=lambda i: i.width, default=None)
 
-    def too_wide(self, bits=INT64_SAFE_BITS):
-        """The first intermediate wider than ``bits`` (the int64 model holds ``bits`` exactly)."""
-        return next((i for i in self.intermediates if i.width > bits), None)
+    def past(self, bits):
+        """The intermediates the datapath builds (a write, an output or a next state reads them)
+        that are wider than ``bits``, widest first."""
+        return sorted((i for n, i in enumerate(self.intermediates) if i.width > bits and n in self.live),
+                      key=lambda i: -i.width)
 
 
 class WidthOps(Ops):
@@ -516,16 +568,23 @@ class WidthOps(Ops):
 
     Widths follow Amaranth's rules, which are the RTL's: ``a + b`` and ``a - b`` are one bit
     wider than the wider (aligned) term, ``-a`` one bit wider than ``a``, ``a * b`` as wide as
-    both together, ``a << n`` ``n`` bits wider; a constant is as wide as its format.
+    both together, ``a << n`` ``n`` bits wider; a constant is as wide as its format. A cast point
+    without a format keeps its value exact: the report notes its width, the sums that hold it and
+    the write that consumes it (what the default cast formats are made from).
     """
 
     def __init__(self, formats):
         super().__init__(formats)
         self.report = WidthReport()
 
-    def _node(self, width, text, points, kind):
-        self.report.intermediates.append(Intermediate(text, width, frozenset(points), kind))
-        return _W(width, text, frozenset(points))
+    def _node(self, width, text, points, kind, casts=frozenset(), args=()):
+        self.report.intermediates.append(Intermediate(text, width, frozenset(points), kind, None, casts))
+        deps = frozenset().union(*(a.deps for a in args)) | {len(self.report.intermediates) - 1}
+        return _W(width, text, frozenset(points), casts, deps)
+
+    def reads(self, value):
+        """Mark what ``value`` (an :class:`Fx`) is made of as built: an output or a next state reads it."""
+        self.report.live |= value.raw.deps
 
     def input(self, raw, point, name=None):
         value = super().input(raw, point, name)
@@ -537,6 +596,18 @@ class WidthOps(Ops):
         out.raw.points = out.raw.points | {_label(point)}
         return out
 
+    def _exact_cast(self, a, point):
+        self.report.exact_casts.setdefault(point, ExactCast(a.raw.width, a.frac))
+        return Fx(_W(a.raw.width, a.raw.text, a.raw.points, a.raw.casts | {point}, a.raw.deps), a.frac, a.const, None,
+                  a.name)
+
+    def _consumed(self, raw, into, fmt):
+        self.report.live |= raw.deps
+        for point in raw.casts:
+            cast = self.report.exact_casts[point]
+            if cast.into is None:
+                self.report.exact_casts[point] = ExactCast(cast.width, cast.frac, into, fmt)
+
     def _input(self, raw, fmt, name):
         return _W(fmt.width, name, frozenset([name]))
 
@@ -547,50 +618,59 @@ class WidthOps(Ops):
         return _W(1, "0", frozenset())
 
     def _shl(self, raw, n):
-        return _W(raw.width + n, raw.text, raw.points)
+        return _W(raw.width + n, raw.text, raw.points, raw.casts, raw.deps)
 
     def _add(self, x, y):
-        return self._node(max(x.width, y.width) + 1, f"{x.text} + {y.text}", x.points | y.points, "sum")
+        return self._node(max(x.width, y.width) + 1, f"{x.text} + {y.text}", x.points | y.points, "sum", x.casts | y.casts,
+                          (x, y))
 
     def _sub(self, x, y):
-        return self._node(max(x.width, y.width) + 1, f"{x.text} - {_paren(y.text)}", x.points | y.points, "sum")
+        return self._node(max(x.width, y.width) + 1, f"{x.text} - {_paren(y.text)}", x.points | y.points, "sum",
+                          x.casts | y.casts, (x, y))
 
     def _neg(self, x):
-        return self._node(x.width + 1, f"-{_paren(x.text)}", x.points, "sum")
+        return self._node(x.width + 1, f"-{_paren(x.text)}", x.points, "sum", x.casts, (x,))
 
     def _mul(self, x, y):
         self.report.multipliers.append((f"{_paren(x.text)}*{_paren(y.text)}", x.width, y.width, x.points, y.points))
-        return self._node(x.width + y.width, f"{_paren(x.text)}*{_paren(y.text)}", x.points | y.points, "product")
+        return self._node(x.width + y.width, f"{_paren(x.text)}*{_paren(y.text)}", x.points | y.points, "product",
+                          x.casts | y.casts, (x, y))
 
     def _abs(self, x):
-        return self._node(x.width + 1, f"|{x.text}|", x.points, "sum")
+        return self._node(x.width + 1, f"|{x.text}|", x.points, "sum", x.casts, (x,))
 
     def _lt(self, x, y):
-        self._node(max(x.width, y.width) + 1, f"{x.text} < {y.text}", x.points | y.points, "comparison")
-        return _W(1, f"{x.text} < {y.text}", x.points | y.points)
+        node = self._node(max(x.width, y.width) + 1, f"{x.text} < {y.text}", x.points | y.points, "comparison",
+                          x.casts | y.casts, (x, y))
+        return _W(1, f"{x.text} < {y.text}", x.points | y.points, frozenset(), node.deps)
 
     def _mux(self, cond, x, y):
-        return _W(max(x.width, y.width), f"({cond.text} ? {x.text} : {y.text})", x.points | y.points)
+        return _W(max(x.width, y.width), f"({cond.text} ? {x.text} : {y.text})", x.points | y.points, x.casts | y.casts,
+                  cond.deps | x.deps | y.deps)
 
     def _rq(self, raw, src_frac, fmt, name):
         self.report.writes.append((name, raw.width, fmt))
+        self._consumed(raw, name, fmt)
         if self.report.intermediates and self.report.intermediates[-1].text == raw.text:
             last = self.report.intermediates[-1]
-            self.report.intermediates[-1] = Intermediate(last.text, last.width, last.points, last.kind, name)
+            self.report.intermediates[-1] = Intermediate(last.text, last.width, last.points, last.kind, name, last.casts)
         return _W(fmt.width, name, frozenset([name])), False
 
     def _div(self, num, den, shift, fmt, name):
         qbits = quotient_bits(fmt)
         points = num.points | den.points | {name}
         # |num| << shift is compared with den << quotient_bits (kfpga.core.ops.divide)
-        self._node(num.width + shift + 1, f"|{num.text}| << {shift}", points, "dividend")
-        self._node(den.width + qbits, f"{den.text} << {qbits}", points, "comparison")
+        self._consumed(self._node(num.width + shift + 1, f"|{num.text}| << {shift}", points, "dividend", num.casts,
+                                  (num,)), name, fmt)
+        self._consumed(self._node(den.width + qbits, f"{den.text} << {qbits}", points, "comparison", den.casts, (den,)),
+                       name, fmt)
         return _W(fmt.width, name, frozenset([name])), False
 
     def _sqrt(self, raw, shift, fmt, name):
         # the radicand, shifted; the restoring root compares it with the root so far
-        self._node(raw.width + max(shift, 0), f"{raw.text} << {shift}" if shift >= 0 else f"{raw.text} >> {-shift}",
-                   raw.points | {name}, "radicand")
+        self._consumed(self._node(raw.width + max(shift, 0),
+                                  f"{raw.text} << {shift}" if shift >= 0 else f"{raw.text} >> {-shift}",
+                                  raw.points | {name}, "radicand", raw.casts, (raw,)), name, fmt)
         return _W(fmt.width, name, frozenset([name])), False
 
     def overflow(self):
@@ -676,7 +756,7 @@ class CostOps(Ops):
         return 0
 
     def _rq(self, raw, src_frac, fmt, name):
-        return 0, False
+        return 0, False  # a write, a cast among them: its rounding is part of the write
 
     def _div(self, num, den, shift, fmt, name):
         self.counts["divisions"] += 1
@@ -697,6 +777,21 @@ def update_cost(config, variant):
     inputs = {name: ops.input(0, config.input_format, name) for name in config.inputs}
     spec_variant.update(ops, k, state, inputs)
     return dict(ops.counts)
+
+
+def update_widths(spec, params, formats, variant, input_format):
+    """What :class:`WidthOps` finds in the update of ``spec``'s ``variant`` with ``formats`` (the
+    inputs in ``input_format``): a :class:`WidthReport`."""
+    v = spec.variants[variant]
+    ops = WidthOps(formats)
+    k = ops.constants(v.constants(params))
+    x = {name: ops.input(None, point, name) for name, point in v.state_for(params)}
+    u = {name: ops.input(None, input_format, name) for name, _ in spec.inputs_for(params)}
+    x_next, outs = v.update(ops, k, x, u)
+    for value in [*x_next.values(), *outs.values()]:
+        if isinstance(value, Fx):
+            ops.reads(value)
+    return ops.report
 
 
 # -- exact rationals: the spec ----------------------------------------------------------------------

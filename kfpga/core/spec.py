@@ -53,8 +53,10 @@ class Point:
         The point's name (``formats.<name>`` in a config) and what it holds.
     role:
         ``"register"`` (a state or output register: the analysed range plus a guard bit, and
-        ``frac`` fraction bits) or ``"operand"`` (feeds an embedded multiplier: as many
-        fraction bits as an 18-bit word leaves).
+        ``frac`` fraction bits), ``"operand"`` (feeds an embedded multiplier: as many
+        fraction bits as an 18-bit word leaves) or ``"cast"`` (a product's or a sum's own result
+        format, :meth:`~kfpga.core.ops.Ops.cast`: optional, the value stays exact without one; by
+        default it gets one where the exact sum it enters would pass the word budget).
     variants:
         The variants that write it (empty: all).
     frac:
@@ -75,12 +77,17 @@ class Point:
     constant: bool = False
 
     def __post_init__(self):
-        if self.role not in ("register", "operand"):
-            raise ValueError(f"role must be 'register' or 'operand', not {self.role!r}")
+        if self.role not in ("register", "operand", "cast"):
+            raise ValueError(f"role must be 'register', 'operand' or 'cast', not {self.role!r}")
 
     @property
     def operand(self):
         return self.role == "operand"
+
+    @property
+    def cast(self):
+        """An optional result format of a product or a sum (no format: the value stays exact)."""
+        return self.role == "cast"
 
 
 @dataclass(frozen=True)
@@ -284,7 +291,9 @@ class FilterSpec:
     points_for:
         ``points_for(params) -> names``: the points a config of these parameters has.
     default_formats:
-        ``default_formats(params, ranges, *, operand_bits, state_frac) -> {point: QFormat}``.
+        ``default_formats(params, ranges, *, operand_bits, state_frac, max_word) -> {point: QFormat}``
+        (``max_word``, the word budget, may be left out of the signature; the cast points' formats
+        are the config's, from :func:`~kfpga.core.formats.cast_formats`).
     ranges:
         ``ranges(params, stimulus=None) -> {point: largest magnitude}`` from float runs.
     validate:

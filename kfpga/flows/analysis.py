@@ -10,7 +10,7 @@ import numpy as np
 
 from kfpga.core.config import FilterConfig, analysed_ranges, default_formats
 from kfpga.core.fixedmodel import FixedModel
-from kfpga.core.formats import MAX_OPERAND_BITS
+from kfpga.core.formats import MAX_WORD
 from kfpga.core.plots import pyplot, save_figure
 
 __all__ = ["sample_count", "rmse", "sqnr_db", "float_run", "Comparison", "compare", "limit_cycles", "sweep",
@@ -217,7 +217,7 @@ def precision_warnings(config, budget=0.01):
 def sweep_config(params, width, ranges):
     """Formats for a sweep point: operands ``width`` bits, registers ``width - 10`` fraction bits."""
     formats = default_formats(params, ranges=ranges, operand_bits=width, state_frac=max(width - 10, 0))
-    return FilterConfig(params=params, formats=formats, check_ranges=False, max_operand_bits=max(width, MAX_OPERAND_BITS))
+    return FilterConfig(params=params, formats=formats, check_ranges=False, max_word=max(width, MAX_WORD))
 
 
 def sample_count(y):

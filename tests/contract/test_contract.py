@@ -54,14 +54,16 @@ HW_CASES = [pytest.param(spec.name, variant, architecture, id=f"{spec.name}-{var
 
 
 def random_config(spec, variant, rng):
-    """Random parameters, and formats near (and sometimes well below) their defaults; valid."""
+    """Random parameters, and formats near (and sometimes well below) their defaults; valid. Half of
+    the configs have a narrow word budget, so that most cast points get formats of their own."""
     for _ in range(200):
         params = spec.random_params(rng)
         if "init" in {f.name for f in dataclasses.fields(params)} and rng.random() < 0.4:
             with contextlib.suppress(ValueError):  # the start from the first samples, where the model has one
                 params = dataclasses.replace(params, init="measurement")
+        budget = {"max_word": int(rng.integers(10, 37))} if rng.random() < 0.5 else {}
         try:
-            base = FilterConfig(filter=spec.name, params=params)
+            base = FilterConfig(filter=spec.name, params=params, **budget)
             base.require_variant(variant)
         except ConfigError:
             continue
@@ -82,7 +84,7 @@ def random_config(spec, variant, rng):
             if same is not None:
                 formats[name] = formats[same].with_rules(rounding=str(rng.choice(ROUNDINGS)))
         try:
-            return FilterConfig(filter=spec.name, params=params, formats=formats, check_ranges=False)
+            return FilterConfig(filter=spec.name, params=params, formats=formats, check_ranges=False, **budget)
         except ConfigError:
             continue
     raise AssertionError(f"no valid random config for {spec.name} in 200 tries")
@@ -314,3 +316,54 @@ def test_each_overflow_flag_reaches_the_estimate_on_its_own(name, variant, archi
         report = run_core(narrow, variant, y, seed=seed, p_idle=0.2, p_ready=0.6,
                           options={"architecture": architecture})  # every flag against the model
         assert report["got"]["overflow"][alone].all(), point
+
+
+#: The designs of the filters whose models have cast points (a product's own result format).
+CAST_CASES = [case for case in HW_CASES
+              if any(registry.get(case.values[0]).points[p].cast for p in FilterConfig(filter=case.values[0]).casts)]
+
+
+def cast_config(name, rng):
+    """The filter's default model with a narrow word budget (every cast point gets a format), each
+    cast rounded by a random rule."""
+    config = FilterConfig(filter=name, max_word=14)
+    casts = {p: fmt.with_rules(rounding=str(rng.choice(ROUNDINGS))) for p, fmt in config.casts.items() if fmt}
+    return FilterConfig(filter=name, formats={**config.formats, **casts}, max_word=14)
+
+
+@pytest.mark.parametrize(("name", "variant", "architecture"), CAST_CASES)
+def test_rtl_rounds_every_cast_point_as_the_model(name, variant, architecture, seed):
+    """Every cast point with a format of its own and a random rounding rule: the RTL equals the
+    model, with backpressure."""
+    rng = np.random.default_rng(seed)
+    config = cast_config(name, rng)
+    assert config.casts and all(config.casts.values())
+    n = samples_for(config, variant, 600, 1, architecture)
+    report = run_core(config, variant, codes(rng, n), seed=seed, p_idle=0.3, p_ready=0.6,
+                      options={"architecture": architecture})
+    assert report["compared"] == n
+
+
+@pytest.mark.parametrize(("name", "variant", "architecture"), CAST_CASES)
+def test_a_wrong_rounding_of_one_product_is_caught(name, variant, architecture, seed):
+    """A core built with one cast point rounded by another rule than the model's: the scoreboard
+    finds it (the contract can fail on a per-operation format)."""
+    rng = np.random.default_rng(seed)
+    config = cast_config(name, rng)
+    n = samples_for(config, variant, 400, 1, architecture)
+    y = codes(rng, n)
+    model = FixedModel(config, variant=variant).run(y)
+    for point, fmt in config.casts.items():
+        other = next(r for r in ROUNDINGS if r != fmt.rounding.value)
+        planted = FilterConfig(filter=name, formats={**config.formats, point: fmt.with_rules(rounding=other)},
+                               max_word=14)
+        changed = FixedModel(planted, variant=variant).run(y)
+        if any((changed.outputs[f] != model.outputs[f]).any() for f in config.output_names):
+            break  # a rounding of this point that the outputs show
+    else:
+        raise AssertionError(f"no cast point of {name} changes an output when its rounding changes")
+    caught = run_core(planted, variant, y, seed=seed, options={"architecture": architecture}, model_config=config,
+                      check=False)
+    assert caught["mismatches"] > 0, point
+    # and built with the planted rule, the core is the planted model's
+    assert run_core(planted, variant, y, seed=seed, options={"architecture": architecture})["compared"] == n
