@@ -18,8 +18,9 @@ Two things differ from what Quartus will build, and the flow corrects for both:
 The logic-cell figure comes from the carry-aware netlist too: LUT4s, plus one logic element
 per adder bit (a Cyclone LE in arithmetic mode makes a sum bit and its carry), plus flip-flops,
 less the flip-flops fed by a LUT or adder bit that drives nothing else (Quartus packs such a
-pair into one logic element) and less those fed straight by a product (they are the embedded
-multiplier's output register, Cyclone II Device Handbook vol. 1, "Embedded Multipliers").
+pair into one logic element), less those fed straight by a product and those that feed nothing
+but a multiplier's operand (they are the embedded multiplier's own output and input registers,
+Cyclone II Device Handbook vol. 1, "Embedded Multipliers": each has input and output registers).
 ``luts`` is the plain LUT4 count of the ``synth_intel`` netlist, an upper bound, since it
 builds each adder bit from two LUTs.
 """
@@ -252,10 +253,25 @@ def _readers(module):
     return readers
 
 
+def _multiplier_inputs(module):
+    """Net bits that a multiplier reads and nothing else does."""
+    others, mul = set(), set()
+    for c in module["cells"].values():
+        for port, direction in c.get("port_directions", {}).items():
+            if direction == "input":
+                bits = {b for b in c["connections"].get(port, []) if isinstance(b, int)}
+                (mul if c["type"] == "kfpga_mul" else others).update(bits)
+    for port in module["ports"].values():
+        if port["direction"] == "output":
+            others.update(b for b in port["bits"] if isinstance(b, int))
+    return mul - others
+
+
 def _logic_cells(carry):
     """Logic-element estimate from the carry-aware netlist (see module docstring)."""
     cells = carry["cells"].values()
     readers = _readers(carry)
+    operand_bits = _multiplier_inputs(carry)
     logic_bits, product_bits = {}, set()
     luts = alu_bits = ff_bits = packed = 0
     for c in cells:
@@ -275,8 +291,11 @@ def _logic_cells(carry):
             d = c["connections"].get("D", [])
             ff_bits += len(d)
             packed += sum(1 for bit in d if isinstance(bit, int) and bit in logic_bits and readers[bit] == 1)
-            # a register right after a multiplier is the embedded multiplier's own output register
+            # a register right after a multiplier is the embedded multiplier's own output register,
+            # one that only a multiplier reads its input register
             packed += sum(1 for bit in d if isinstance(bit, int) and bit in product_bits and readers[bit] == 1)
+            q = [bit for bit in c["connections"].get("Q", []) if isinstance(bit, int)]
+            packed += sum(1 for bit in q if bit in operand_bits and not (bit in product_bits or bit in logic_bits))
     return luts + alu_bits + ff_bits - packed
 
 

@@ -1,0 +1,375 @@
+"""The folded core: any filter's update as microcode on one 18-bit datapath (``hw/microcode.py``).
+
+At a low sample rate a filter has hundreds of thousands of clock cycles for each update and
+needs few logic cells. :class:`FoldedCore` has one register file of 18-bit words in M4K block
+memory (two copies: two read ports), one signed 18 x 18 embedded multiplier and one accumulator;
+its microcode, in another M4K block, is the filter's own update compiled step by step, so it
+computes the model's integers for every update the operations layer writes (divisions and square
+roots included). A step goes through four pipeline stages::
+
+    R  the step's word is in the program memory's read register: the operands are addressed
+       (the first one by a flag when the step is predicated; a state's address with the channel)
+    X  the operands read and multiplied, the product into the multiplier's output register
+    A  acc = acc, acc >> 17 or 0, plus the product
+    W  the sum's low or top digit written to the register file, or an output chunk loaded; a
+       flag captured from the sum's sign or its bit 16
+
+A step issues every cycle unless its word says to wait (the compiler's schedule keeps a word
+read, and a flag used, at least four cycles after the step that writes it), and a step
+may begin a loop of the steps after it or end one (a counter, a start address). Each stage is
+at most one carry chain, one multiplier or one memory read between registers.
+"""
+
+from __future__ import annotations
+
+from amaranth import Cat, Const, Module, Mux, Signal, signed, unsigned
+from amaranth.lib.memory import Memory
+
+from kfpga.core.board import MAX_SENSORS
+from kfpga.hw.core import Core
+from kfpga.hw.microcode import BEGIN, DIGIT, END, FLAGS, HI, LO, OR, OUT, READ_LATENCY, WORD, compile_update
+from kfpga.hw.storage import m4k_blocks
+
+__all__ = ["FoldedCore", "encode", "make_core", "word_layout"]
+
+
+def word_layout(program):
+    """The fields of a program word, LSB first: ``{name: bits}`` (addresses as wide as the register
+    file needs; ``d`` also holds an output chunk's number and a loop's count)."""
+    abits = program.address_bits
+    counts = [w["count"] for w in program.words if w["loop"] == BEGIN] + [len(program.chunks)]
+    dbits = max(abits, max(counts).bit_length())
+    return {"a": abits, "a2": abits, "b": abits, "d": dbits, "acc": 2, "pred": 2, "wr": 2, "cap": 2, "flag": 2,
+            "bit16": 1, "ovf": 1, "loop": 2, "wait": 3, "end": 1}
+
+
+def encode(program):
+    """The program memory's words."""
+    layout = word_layout(program)
+    out = []
+    for w in program.words:
+        values = dict(w)
+        if w["loop"] == BEGIN:
+            values["d"] = w["count"]
+        word, offset = 0, 0
+        for name, bits in layout.items():
+            if not 0 <= values[name] < 1 << bits:
+                raise ValueError(f"program field {name} = {values[name]} does not fit {bits} bits")
+            word |= values[name] << offset
+            offset += bits
+        out.append(word)
+    return out
+
+
+class FoldedCore(Core):
+    """A filter's update as microcode on one multiplier and one accumulator (module docstring).
+
+    A sample's digits are written to the register file one a cycle while ``i.valid`` is high in
+    the idle state (and no estimate waits on ``o``), and the word is taken with the last
+    (``i.ready``) in cycle ``c``; the update's steps run, and the estimate is on ``o`` in cycle
+    ``c + latency``; the next word's digits can be written from then on. After reset
+    the core first writes every channel's reset state (:attr:`startup_cycles`, during which it
+    takes no sample). A channel number outside ``0..channels-1`` reads a zero state and updates
+    nothing.
+
+    Parameters
+    ----------
+    config:
+        The shared :class:`~kfpga.core.config.FilterConfig`.
+    variant:
+        The variant whose update the core runs.
+    channels:
+        Independent channel states (1..256), each a block of the register file.
+
+    Members
+    -------
+    i : In(stream.Signature(input_layout(config, channels)))
+        Samples.
+    o : Out(stream.Signature(output_layout(config, channels)))
+        Estimates, one per sample.
+    overflow : Out(1)
+        Sticky: some write saturated (or wrapped) since reset.
+    """
+
+    max_channels = MAX_SENSORS
+
+    def __init__(self, config, variant, *, channels=1, program=None):
+        super().__init__(config, variant, channels)
+        self.program = program or compile_update(config, variant, channels=channels,
+                                                 channel_bits=len(self.i.payload.channel))
+
+    @property
+    def load_cycles(self):
+        """Cycles before the handshake that write the sample's digits but the last (the input word
+        is read while its ``valid`` is high, and taken with its last digit)."""
+        return len(self.program.sample_addrs) - 1
+
+    @property
+    def cycles_per_update(self):
+        """Cycles from taking one sample to being able to take the next (``o`` always ready)."""
+        return self.load_cycles + self.latency
+
+    @property
+    def latency(self):
+        """Cycles from the input handshake cycle to the first cycle with ``o.valid`` high."""
+        return 1 + self.program.update_cycles
+
+    @property
+    def startup_cycles(self):
+        """Cycles after reset before the first sample is taken (every channel's reset state written)."""
+        return self.channels * (1 + self.program.init_cycles)
+
+    @property
+    def m4k_blocks(self):
+        """Block memories: two copies of the register file and the program."""
+        p = self.program
+        return 2 * m4k_blocks(p.depth, WORD) + m4k_blocks(len(p.words), sum(word_layout(p).values()))
+
+    def elaborate(self, platform):
+        b = _Build(self, Module())
+        b.memories()
+        b.fetch()
+        b.read()
+        b.multiply()
+        b.accumulate()
+        b.write()
+        b.schedule()
+        return b.m
+
+
+class _Build:
+    """The parts of a :class:`FoldedCore`, one method per stage; each keeps as attributes the
+    signals the later ones use."""
+
+    def __init__(self, core, m):
+        self.core, self.m, self.p = core, m, core.program
+        self.layout = word_layout(self.p)
+        self.abits = self.p.address_bits
+        p = self.p
+        self.channel = Signal.like(core.i.payload.channel, name="channel")
+        cbits = len(self.channel)
+        # the block a channel's states are in: past the last channel, the spare block of zeros
+        self.spare = core.channels < (1 << cbits)
+        self.in_range = Signal(name="in_range")
+        self.block = Signal(max(cbits, 1), name="block")
+        m.d.comb += self.in_range.eq(self.channel < core.channels if self.spare else 1)
+        m.d.comb += self.block.eq(Mux(self.in_range, self.channel, core.channels) if self.spare else self.channel)
+        self.update_start = p.init_steps
+
+    def is_state(self, addr):
+        return addr[self.abits - 1] if self.p.state_base == 1 << (self.abits - 1) else Const(0, 1)
+
+    def physical(self, addr):
+        """A register address; state digit j of channel c is at base | c << bits | j."""
+        return Mux(self.is_state(addr), addr | (self.block << self.p.state_bits), addr)
+
+    def memories(self):
+        m, p = self.m, self.p
+        self.rom = Memory(shape=unsigned(sum(self.layout.values())), depth=max(len(p.words), 2), init=encode(p))
+        m.submodules.program = self.rom
+        self.fetch_port = self.rom.read_port()
+        files = [Memory(shape=unsigned(WORD), depth=p.depth, init=p.init) for _ in range(2)]
+        for n, mem in enumerate(files):
+            m.submodules[f"registers_{'ab'[n]}"] = mem
+        self.reads = [mem.read_port() for mem in files]
+        writes = [mem.write_port() for mem in files]
+        self.wr_addr, self.wr_data = Signal(self.abits, name="wr_addr"), Signal(WORD, name="wr_data")
+        self.wr_en = Signal(name="wr_en")
+        for port in writes:
+            m.d.comb += [port.addr.eq(self.wr_addr), port.data.eq(self.wr_data), port.en.eq(self.wr_en)]
+
+    def fetch(self):
+        """The program counter, the wait counter and the loop: which word is in the read register."""
+        m, p = self.m, self.p
+        data = self.fetch_port.data
+        self.word, offset = {}, 0
+        for name, bits in self.layout.items():
+            self.word[name] = data[offset:offset + bits]
+            offset += bits
+        # datapath and operand registers have no reset (what they hold is read only where a valid
+        # bit, reset, says so): the multiplier's own registers have none, and the rest costs less
+        self.pc = Signal(range(max(len(p.words), 2)), name="pc", reset_less=True)
+        self.pc_next = Signal.like(self.pc, name="pc_next")
+        self.waiting = Signal(3, name="waiting")
+        self.loop_start = Signal.like(self.pc, name="loop_start", reset_less=True)
+        count_max = max([w["count"] for w in p.words if w["loop"] == BEGIN] + [1])
+        self.loop_left = Signal(range(count_max + 1), name="loop_left", reset_less=True)
+        more = Signal(name="loop_more", reset_less=True)  # loop_left > 1, registered: the loop goes back at its end
+        self.running = Signal(name="running")
+        self.issue = Signal(name="issue")
+        self.last = Signal(name="last")  # the word issued ends its routine
+        m.d.comb += [self.fetch_port.addr.eq(self.pc_next), self.fetch_port.en.eq(1),
+                     self.issue.eq(self.running & (self.waiting == 0))]
+        back = (self.word["loop"] == END) & more
+        m.d.comb += [self.pc_next.eq(self.pc), self.last.eq(self.issue & self.word["end"] & ~back)]
+        m.d.sync += self.pc.eq(self.pc_next)
+        with m.If(self.issue):
+            m.d.sync += self.waiting.eq(Mux(self.last, 0, self.word["wait"]))  # a routine starts at once
+            m.d.comb += self.pc_next.eq(Mux(back, self.loop_start, self.pc + 1))
+            with m.If(self.word["loop"] == BEGIN):
+                m.d.sync += [self.loop_start.eq(self.pc + 1), self.loop_left.eq(self.word["d"]),
+                             more.eq(self.word["d"] > 1)]
+            with m.Elif(back):
+                m.d.sync += [self.loop_left.eq(self.loop_left - 1), more.eq(self.loop_left > 2)]
+        with m.Elif(self.waiting != 0):
+            m.d.sync += self.waiting.eq(self.waiting - 1)
+
+    def read(self):
+        """R: the operands addressed (the first by its predicate's flag)."""
+        m, w = self.m, self.word
+        self.flags = [Signal(name=f"flag{j}", reset_less=True) for j in range(FLAGS)]
+        chosen = Signal(name="predicate")
+        m.d.comb += chosen.eq(Mux(w["pred"] == 0, 0, Mux(w["pred"] == 1, self.flags[0], self.flags[1])))
+        a = Mux(chosen, w["a2"], w["a"])
+        for port, addr in zip(self.reads, (a, w["b"]), strict=True):
+            m.d.comb += [port.addr.eq(self.physical(addr)), port.en.eq(1)]
+        # what the later stages need of the step: X and A carry it
+        self.stages = []
+        fields = {"acc": 2, "cap": 2, "flag": 2, "bit16": 1, "ovf": 1, "wr": 2, "d": self.layout["d"]}
+        prev = {"valid": self.issue, **{name: w[name] for name in fields}}
+        for n in range(2):
+            reg = {"valid": Signal(name=f"p{n + 1}_valid")}
+            reg.update({name: Signal(bits, name=f"p{n + 1}_{name}", reset_less=True) for name, bits in fields.items()})
+            m.d.sync += [reg[name].eq(prev[name]) for name in reg]
+            self.stages.append(reg)
+            prev = reg
+
+    def multiply(self):
+        """X: the operands read and multiplied, the product registered (the multiplier's own register)."""
+        m = self.m
+        self.product = Signal(signed(2 * WORD), name="product", reset_less=True)
+        m.d.sync += self.product.eq(self.reads[0].data.as_signed() * self.reads[1].data.as_signed())
+
+    def accumulate(self):
+        """A: acc = S(acc) + product (the mode's two bits: shift, clear)."""
+        m, p, a = self.m, self.p, self.stages[1]
+        self.acc = Signal(signed(p.acc_bits), name="acc", reset_less=True)
+        shift = a["acc"][0]  # SHIFT = 1, CLEAR = 2
+        keep = Signal(name="acc_keep", reset_less=True)  # one-hot with shift, registered: a LUT4 a bit
+        m.d.sync += keep.eq(~self.stages[0]["acc"].any())
+        base = Signal(signed(p.acc_bits), name="acc_base")
+        m.d.comb += base.eq((self.acc & keep.replicate(p.acc_bits)) | ((self.acc >> DIGIT) & shift.replicate(p.acc_bits)))
+        with m.If(a["valid"]):
+            m.d.sync += self.acc.eq(base + self.product)
+        self.w = {name: Signal(len(a[name]), name=f"w_{name}", reset_less=name != "valid")
+                  for name in ("valid", "wr", "d", "cap", "flag", "bit16", "ovf")}
+        m.d.sync += [reg.eq(a[name]) for name, reg in self.w.items()]
+
+    def write(self):
+        """W: the sum's digit into the register file, or its low bits into an output chunk; a flag
+        (or the sample's overflow flag) from its sign or its bit 16."""
+        m, core, p, w = self.m, self.core, self.p, self.w
+        acc = self.acc
+        self.digit = Cat(acc[:DIGIT], Mux(w["wr"] == HI, acc[DIGIT], 0))
+        self.step_write = Signal(name="step_write")
+        addr = w["d"][:self.abits]
+        m.d.comb += self.step_write.eq(w["valid"] & ((w["wr"] == LO) | (w["wr"] == HI))
+                                       & ~(self.is_state(addr) & ~self.in_range))
+        self.step_addr = self.physical(addr)
+        # the output chunks: each a slice of the estimate's fields (a chunk's number in d's low bits)
+        self.outs = {name: Signal(signed(core.config.output_format(name).width), name=f"out_{name}", reset_less=True)
+                     for name in p.outputs}
+        out = Signal(name="out_write")
+        m.d.comb += out.eq(w["valid"] & (w["wr"] == OUT))
+        low = w["d"][:max(1, (len(p.chunks) - 1).bit_length())]
+        for j, (name, offset, width) in enumerate(p.chunks):
+            with m.If(out & (low == j)):
+                m.d.sync += self.outs[name][offset:offset + width].eq(acc[:width])
+        self.fo = Signal(name="sample_overflow", reset_less=True)
+        bit = Mux(w["bit16"], acc[16], acc[-1])
+        with m.If(w["valid"] & (w["cap"] != 0)):
+            for j, flag in enumerate(self.flags):
+                with m.If(w["flag"] == j):
+                    m.d.sync += flag.eq(bit | ((w["cap"] == OR) & flag))
+            with m.If(w["ovf"]):
+                m.d.sync += self.fo.eq(self.fo | bit)
+
+    def schedule(self):
+        """The states: INIT (each channel's reset state), IDLE (a sample's digits written, one a
+        cycle, straight from the input word, which is taken with the last), RUN (the update's
+        steps), DRAIN (the last step's write)."""
+        m, core, p = self.m, self.core, self.p
+        self.sample_write, self.sample_addr, self.sample_data = self.sample_port()
+        m.d.comb += [self.wr_addr.eq(Mux(self.sample_write, self.sample_addr, self.step_addr)),
+                     self.wr_data.eq(Mux(self.sample_write, self.sample_data, self.digit)),
+                     self.wr_en.eq(self.sample_write | self.step_write)]
+        self.outputs()
+        drain = Signal(range(READ_LATENCY), name="drain")
+        self.idle = Signal(name="idle")
+        initializing = Signal(init=1, name="initializing")  # RUN runs the reset routine, channel by channel
+        free = ~core.o.valid | core.o.ready  # no estimate waits, or it is taken now
+        last_digit = self.load == len(p.sample_addrs) - 1
+        # ready does not follow valid within a cycle: it is high once the other digits are written
+        m.d.comb += core.i.ready.eq(self.idle & free & last_digit)
+        with m.FSM(name="schedule") as fsm:
+            with m.State("INIT"):  # the next channel's reset state, by the program's first routine
+                m.d.comb += self.pc_next.eq(0)
+                m.d.sync += self.running.eq(1)
+                m.next = "RUN"
+            with m.State("IDLE"):
+                m.d.comb += self.pc_next.eq(self.update_start)
+                with m.If(core.i.valid & free):
+                    m.d.comb += self.sample_write.eq(1)
+                    m.d.sync += self.load.eq(self.load + 1)
+                    with m.If(last_digit):  # the last digit: the word is taken
+                        m.d.sync += [self.channel.eq(core.i.payload.channel), self.fo.eq(0), self.load.eq(0),
+                                     self.running.eq(1)]
+                        m.next = "RUN"
+                with m.Else():
+                    m.d.sync += self.load.eq(0)
+            with m.State("RUN"):
+                with m.If(self.last):
+                    m.d.sync += [self.running.eq(0), drain.eq(0)]
+                    m.next = "DRAIN"
+            with m.State("DRAIN"):  # the last step's write; then the next channel's reset, or the estimate
+                m.d.sync += drain.eq(drain + 1)
+                with m.If(drain == READ_LATENCY - 2):  # the last step's write is in this cycle
+                    with m.If(~initializing):
+                        m.d.sync += core.o.valid.eq(1)
+                        m.next = "IDLE"
+                    with m.Elif(self.channel == core.channels - 1):
+                        m.d.sync += [self.channel.eq(0), initializing.eq(0)]
+                        m.next = "IDLE"
+                    with m.Else():
+                        m.d.sync += self.channel.eq(self.channel + 1)
+                        m.next = "INIT"
+        m.d.comb += self.idle.eq(fsm.ongoing("IDLE"))
+
+    def sample_port(self):
+        """The register file's write port for a sample's digits: ``(enable, address, data)``, the
+        digit ``load`` of the input word (the lower digits unsigned, the top one sign-extended)."""
+        m, core, p = self.m, self.core, self.p
+        self.load = Signal(range(max(len(p.sample_addrs), 2)), name="load")
+        write, addr, data = Signal(name="sample_write"), Signal(self.abits, name="sample_addr"), Signal(WORD,
+                                                                                                       name="sample_digit")
+        digits = []
+        for name, dgt, a in p.sample_addrs:
+            value = getattr(core.i.payload, name)
+            if dgt < p.input_digits - 1:
+                digits.append((a, value.as_unsigned()[DIGIT * dgt:DIGIT * (dgt + 1)]))
+            else:
+                digits.append((a, value.as_signed() >> (DIGIT * dgt)))
+        sel_addr, sel_data = digits[0][0], digits[0][1]
+        for j, (a, value) in enumerate(digits[1:], start=1):  # a chain of multiplexers, not a case block
+            sel_addr, sel_data = Mux(self.load == j, a, sel_addr), Mux(self.load == j, value, sel_data)
+        m.d.comb += [addr.eq(sel_addr), data.eq(sel_data)]
+        return write, addr, data
+
+    def outputs(self):
+        """The estimate's fields from the output chunks; the sample's flag and the sticky one."""
+        m, core = self.m, self.core
+        with m.If(core.o.valid & core.o.ready):
+            m.d.sync += core.o.valid.eq(0)
+        sticky = Signal(name="sticky")
+        m.d.comb += [core.o.payload.channel.eq(self.channel), core.o.payload.overflow.eq(self.fo),
+                     core.overflow.eq(sticky | (core.o.valid & self.fo))]
+        m.d.comb += [getattr(core.o.payload, name).eq(reg) for name, reg in self.outs.items()]
+        m.d.sync += sticky.eq(core.overflow)
+
+
+def make_core(config, variant, *, channels=1, stages=None):
+    """The folded core of any filter's ``variant`` (``channels`` channel states); ``stages`` does not
+    apply (it runs one step at a time)."""
+    if stages is not None:
+        raise ValueError("stages applies to a pipelined loop; the folded core runs one step at a time")
+    return FoldedCore(config, variant, channels=channels)
