@@ -37,20 +37,19 @@ def word_layout(program):
     """The fields of a program word, LSB first: ``{name: bits}`` (addresses as wide as the register
     file needs; ``d`` also holds an output chunk's number and a loop's count)."""
     abits = program.address_bits
-    counts = [w["count"] for w in program.words if w["loop"] == BEGIN] + [len(program.chunks)]
+    counts = [w["count"] for w in program.words if w["loop"] == BEGIN] + [len(program.chunks), len(program.words)]
     dbits = max(abits, max(counts).bit_length())
-    return {"a": abits, "a2": abits, "b": abits, "d": dbits, "acc": 2, "pred": 2, "wr": 2, "cap": 2, "flag": 2,
+    return {"a": abits, "a2": abits, "b": abits, "d": dbits, "acc": 2, "pred": 2, "wr": 2, "cap": 2, "flag": 1,
             "bit16": 1, "ovf": 1, "loop": 2, "wait": 3, "end": 1}
 
 
 def encode(program):
-    """The program memory's words."""
+    """The program memory's words (a loop's begin holds its count in ``d``, its end the address of
+    its first step)."""
     layout = word_layout(program)
     out = []
     for w in program.words:
         values = dict(w)
-        if w["loop"] == BEGIN:
-            values["d"] = w["count"]
         word, offset = 0, 0
         for name, bits in layout.items():
             if not 0 <= values[name] < 1 << bits:
@@ -117,11 +116,11 @@ class FoldedCore(Core):
     @property
     def startup_cycles(self):
         """Cycles after reset before the first sample is taken (every channel's reset state written)."""
-        return self.channels * (1 + self.program.init_cycles)
+        return self.channels * self.program.init_cycles
 
     @property
     def m4k_blocks(self):
-        """Block memories: two copies of the register file and the program."""
+        """Block memories: two copies of the register file and the program (a dual-port ROM)."""
         p = self.program
         return 2 * m4k_blocks(p.depth, WORD) + m4k_blocks(len(p.words), sum(word_layout(p).values()))
 
@@ -168,6 +167,9 @@ class _Build:
         self.rom = Memory(shape=unsigned(sum(self.layout.values())), depth=max(len(p.words), 2), init=encode(p))
         m.submodules.program = self.rom
         self.fetch_port = self.rom.read_port()
+        # the program memory's second port reads the word in R once more, for X: the word of the
+        # step in X with no pipeline register of its own
+        self.again_port = self.rom.read_port()
         files = [Memory(shape=unsigned(WORD), depth=p.depth, init=p.init) for _ in range(2)]
         for n, mem in enumerate(files):
             m.submodules[f"registers_{'ab'[n]}"] = mem
@@ -179,38 +181,43 @@ class _Build:
             m.d.comb += [port.addr.eq(self.wr_addr), port.data.eq(self.wr_data), port.en.eq(self.wr_en)]
 
     def fetch(self):
-        """The program counter, the wait counter and the loop: which word is in the read register."""
+        """The program counter, the wait counter and the loop: which word is in the read register.
+
+        A routine runs while ``running``: a step issues when no wait is left; the last one's write
+        is three cycles later (``ending``, the wait counter counting it down), and the routine is
+        ``finished`` in that cycle. After reset the reset routine runs at once, for channel 0."""
         m, p = self.m, self.p
         data = self.fetch_port.data
         self.word, offset = {}, 0
         for name, bits in self.layout.items():
             self.word[name] = data[offset:offset + bits]
             offset += bits
-        # datapath and operand registers have no reset (what they hold is read only where a valid
-        # bit, reset, says so): the multiplier's own registers have none, and the rest costs less
-        self.pc = Signal(range(max(len(p.words), 2)), name="pc", reset_less=True)
+        self.pc = Signal(range(max(len(p.words), 2)), name="pc")
         self.pc_next = Signal.like(self.pc, name="pc_next")
         self.waiting = Signal(3, name="waiting")
-        self.loop_start = Signal.like(self.pc, name="loop_start", reset_less=True)
         count_max = max([w["count"] for w in p.words if w["loop"] == BEGIN] + [1])
-        self.loop_left = Signal(range(count_max + 1), name="loop_left", reset_less=True)
-        more = Signal(name="loop_more", reset_less=True)  # loop_left > 1, registered: the loop goes back at its end
-        self.running = Signal(name="running")
-        self.issue = Signal(name="issue")
-        self.last = Signal(name="last")  # the word issued ends its routine
+        # datapath and operand registers have no reset (what they hold is read only where a valid
+        # bit, reset, says so): the multiplier's own registers have none, and the rest costs less
+        self.loop_left = Signal(range(count_max), name="loop_left", reset_less=True)  # iterations after this one
+        self.running = Signal(init=1, name="running")
+        self.ending = Signal(name="ending")
+        self.issue, self.last, self.finished = Signal(name="issue"), Signal(name="last"), Signal(name="finished")
         m.d.comb += [self.fetch_port.addr.eq(self.pc_next), self.fetch_port.en.eq(1),
-                     self.issue.eq(self.running & (self.waiting == 0))]
-        back = (self.word["loop"] == END) & more
+                     self.issue.eq(self.running & (self.waiting == 0) & ~self.ending),
+                     self.finished.eq(self.ending & (self.waiting == 1))]
+        back = (self.word["loop"] == END) & (self.loop_left != 0)
         m.d.comb += [self.pc_next.eq(self.pc), self.last.eq(self.issue & self.word["end"] & ~back)]
         m.d.sync += self.pc.eq(self.pc_next)
         with m.If(self.issue):
-            m.d.sync += self.waiting.eq(Mux(self.last, 0, self.word["wait"]))  # a routine starts at once
-            m.d.comb += self.pc_next.eq(Mux(back, self.loop_start, self.pc + 1))
+            # the last step's write is READ_LATENCY - 1 cycles on
+            m.d.sync += self.waiting.eq(Mux(self.last, READ_LATENCY - 1, self.word["wait"]))
+            m.d.comb += self.pc_next.eq(Mux(back, self.word["d"], self.pc + 1))
             with m.If(self.word["loop"] == BEGIN):
-                m.d.sync += [self.loop_start.eq(self.pc + 1), self.loop_left.eq(self.word["d"]),
-                             more.eq(self.word["d"] > 1)]
+                m.d.sync += self.loop_left.eq(self.word["d"])
             with m.Elif(back):
-                m.d.sync += [self.loop_left.eq(self.loop_left - 1), more.eq(self.loop_left > 2)]
+                m.d.sync += self.loop_left.eq(self.loop_left - 1)
+            with m.If(self.last):
+                m.d.sync += self.ending.eq(1)
         with m.Elif(self.waiting != 0):
             m.d.sync += self.waiting.eq(self.waiting - 1)
 
@@ -223,16 +230,19 @@ class _Build:
         a = Mux(chosen, w["a2"], w["a"])
         for port, addr in zip(self.reads, (a, w["b"]), strict=True):
             m.d.comb += [port.addr.eq(self.physical(addr)), port.en.eq(1)]
-        # what the later stages need of the step: X and A carry it
-        self.stages = []
-        fields = {"acc": 2, "cap": 2, "flag": 2, "bit16": 1, "ovf": 1, "wr": 2, "d": self.layout["d"]}
-        prev = {"valid": self.issue, **{name: w[name] for name in fields}}
-        for n in range(2):
-            reg = {"valid": Signal(name=f"p{n + 1}_valid")}
-            reg.update({name: Signal(bits, name=f"p{n + 1}_{name}", reset_less=True) for name, bits in fields.items()})
-            m.d.sync += [reg[name].eq(prev[name]) for name in reg]
-            self.stages.append(reg)
-            prev = reg
+        # what the later stages need of the step: in X its word read again, then a register for A
+        m.d.comb += [self.again_port.addr.eq(self.pc), self.again_port.en.eq(1)]
+        again, offset = {}, 0
+        for name, bits in self.layout.items():
+            again[name] = self.again_port.data[offset:offset + bits]
+            offset += bits
+        fields = {"acc": 2, "cap": 2, "flag": self.layout["flag"], "bit16": 1, "ovf": 1, "wr": 2, "d": self.layout["d"]}
+        x = {"valid": Signal(name="x_valid"), **{name: again[name] for name in fields}}
+        m.d.sync += x["valid"].eq(self.issue)
+        a = {"valid": Signal(name="a_valid")}
+        a.update({name: Signal(bits, name=f"a_{name}", reset_less=True) for name, bits in fields.items()})
+        m.d.sync += [a[name].eq(x[name]) for name in a]
+        self.stages = [x, a]
 
     def multiply(self):
         """X: the operands read and multiplied, the product registered (the multiplier's own register)."""
@@ -246,9 +256,9 @@ class _Build:
         self.acc = Signal(signed(p.acc_bits), name="acc", reset_less=True)
         shift = a["acc"][0]  # SHIFT = 1, CLEAR = 2
         keep = Signal(name="acc_keep", reset_less=True)  # one-hot with shift, registered: a LUT4 a bit
-        m.d.sync += keep.eq(~self.stages[0]["acc"].any())
+        m.d.sync += keep.eq(~self.stages[0]["acc"].any())  # the step in X's mode
         base = Signal(signed(p.acc_bits), name="acc_base")
-        m.d.comb += base.eq((self.acc & keep.replicate(p.acc_bits)) | ((self.acc >> DIGIT) & shift.replicate(p.acc_bits)))
+        m.d.comb += base.eq(Mux(keep, self.acc, Mux(shift, self.acc >> DIGIT, 0)))
         with m.If(a["valid"]):
             m.d.sync += self.acc.eq(base + self.product)
         self.w = {name: Signal(len(a[name]), name=f"w_{name}", reset_less=name != "valid")
@@ -285,55 +295,40 @@ class _Build:
                 m.d.sync += self.fo.eq(self.fo | bit)
 
     def schedule(self):
-        """The states: INIT (each channel's reset state), IDLE (a sample's digits written, one a
-        cycle, straight from the input word, which is taken with the last), RUN (the update's
-        steps), DRAIN (the last step's write)."""
+        """Idle (a sample's digits written, one a cycle, straight from the input word, which is
+        taken with the last) or running a routine: the reset routine once for each channel after
+        reset, then the update's for each sample."""
         m, core, p = self.m, self.core, self.p
         self.sample_write, self.sample_addr, self.sample_data = self.sample_port()
         m.d.comb += [self.wr_addr.eq(Mux(self.sample_write, self.sample_addr, self.step_addr)),
                      self.wr_data.eq(Mux(self.sample_write, self.sample_data, self.digit)),
                      self.wr_en.eq(self.sample_write | self.step_write)]
         self.outputs()
-        drain = Signal(range(READ_LATENCY), name="drain")
-        self.idle = Signal(name="idle")
-        initializing = Signal(init=1, name="initializing")  # RUN runs the reset routine, channel by channel
+        initializing = Signal(init=1, name="initializing")
         free = ~core.o.valid | core.o.ready  # no estimate waits, or it is taken now
         last_digit = self.load == len(p.sample_addrs) - 1
+        idle = ~self.running
         # ready does not follow valid within a cycle: it is high once the other digits are written
-        m.d.comb += core.i.ready.eq(self.idle & free & last_digit)
-        with m.FSM(name="schedule") as fsm:
-            with m.State("INIT"):  # the next channel's reset state, by the program's first routine
-                m.d.comb += self.pc_next.eq(0)
-                m.d.sync += self.running.eq(1)
-                m.next = "RUN"
-            with m.State("IDLE"):
+        m.d.comb += core.i.ready.eq(idle & free & last_digit)
+        with m.If(idle & core.i.valid & free):
+            m.d.comb += self.sample_write.eq(1)
+            m.d.sync += self.load.eq(self.load + 1)
+            with m.If(last_digit):  # the last digit: the word is taken, the update runs
+                m.d.sync += [self.channel.eq(core.i.payload.channel), self.fo.eq(0), self.load.eq(0),
+                             self.running.eq(1)]
+        with m.Elif(idle):
+            m.d.sync += self.load.eq(0)
+        with m.If(self.finished):  # the last step's write is in this cycle
+            m.d.sync += self.ending.eq(0)
+            with m.If(~initializing):
+                m.d.sync += [core.o.valid.eq(1), self.running.eq(0)]
                 m.d.comb += self.pc_next.eq(self.update_start)
-                with m.If(core.i.valid & free):
-                    m.d.comb += self.sample_write.eq(1)
-                    m.d.sync += self.load.eq(self.load + 1)
-                    with m.If(last_digit):  # the last digit: the word is taken
-                        m.d.sync += [self.channel.eq(core.i.payload.channel), self.fo.eq(0), self.load.eq(0),
-                                     self.running.eq(1)]
-                        m.next = "RUN"
-                with m.Else():
-                    m.d.sync += self.load.eq(0)
-            with m.State("RUN"):
-                with m.If(self.last):
-                    m.d.sync += [self.running.eq(0), drain.eq(0)]
-                    m.next = "DRAIN"
-            with m.State("DRAIN"):  # the last step's write; then the next channel's reset, or the estimate
-                m.d.sync += drain.eq(drain + 1)
-                with m.If(drain == READ_LATENCY - 2):  # the last step's write is in this cycle
-                    with m.If(~initializing):
-                        m.d.sync += core.o.valid.eq(1)
-                        m.next = "IDLE"
-                    with m.Elif(self.channel == core.channels - 1):
-                        m.d.sync += [self.channel.eq(0), initializing.eq(0)]
-                        m.next = "IDLE"
-                    with m.Else():
-                        m.d.sync += self.channel.eq(self.channel + 1)
-                        m.next = "INIT"
-        m.d.comb += self.idle.eq(fsm.ongoing("IDLE"))
+            with m.Elif(self.channel == core.channels - 1):  # every channel's reset state written
+                m.d.sync += [self.channel.eq(0), initializing.eq(0), self.running.eq(0)]
+                m.d.comb += self.pc_next.eq(self.update_start)
+            with m.Else():  # the next channel's
+                m.d.sync += self.channel.eq(self.channel + 1)
+                m.d.comb += self.pc_next.eq(0)
 
     def sample_port(self):
         """The register file's write port for a sample's digits: ``(enable, address, data)``, the

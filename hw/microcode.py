@@ -584,15 +584,16 @@ class _Lowering:
         return word.addrs[0]
 
     def double_plus_bit(self, q, flag):
-        """``q = 2 q + (not flag)``, in place; the last step ends the loop."""
+        """``q = 2 q + (not flag)``, in place; then the loop's end (a step of its own, which holds
+        where the loop starts)."""
         for d in range(q.n):
-            end = END if d == q.n - 1 else NONE
             wr = HI if d == q.n - 1 else LO
             if d == 0:
                 self.emit(Mac(q.addrs[0], k(2), CLEAR))
-                self.emit(Mac(ONE, ONE, KEEP, a2=ZERO, pred=flag, wr=wr, d=q.addrs[0], loop=end))
+                self.emit(Mac(ONE, ONE, KEEP, a2=ZERO, pred=flag, wr=wr, d=q.addrs[0]))
             else:
-                self.emit(Mac(q.addrs[d], k(2), SHIFT, wr=wr, d=q.addrs[d], loop=end))
+                self.emit(Mac(q.addrs[d], k(2), SHIFT, wr=wr, d=q.addrs[d]))
+        self.emit(nop(loop=END))
 
     def emit_difference(self, x, y, n, out, *, flag):
         """``out = x - y`` (``n`` digits), ``flag := out < 0``."""
@@ -817,6 +818,12 @@ def _place(config, init_code, update_code, low, state_digits, chunks, channels, 
         init[a] = v & ((1 << WORD) - 1)
     words = [_resolve(mac, addr) for mac in code]
     words[len(init_code) - 1]["end"] = words[-1]["end"] = 1  # the last step of each routine
+    begin = None
+    for pos, w in enumerate(words):  # a loop's end holds its first step's address, its begin the count
+        if w["loop"] == BEGIN:
+            begin, w["d"] = pos, w["count"] - 1
+        elif w["loop"] == END:
+            w["d"] = begin + 1
     # each routine runs on its own: the core waits for the last step's write before another starts
     for part in (words[:len(init_code)], words[len(init_code):]):
         for w, wait in zip(part, _schedule(part), strict=True):
