@@ -27,7 +27,7 @@ from amaranth.lib.memory import Memory
 
 from kfpga.core.board import MAX_SENSORS
 from kfpga.hw.core import Core
-from kfpga.hw.microcode import BEGIN, DIGIT, END, FLAGS, HI, LO, OR, OUT, READ_LATENCY, WORD, compile_update
+from kfpga.hw.microcode import BEGIN, DIGIT, END, FLAGS, HI, LO, OR, OUT, READ_LATENCY, WORD, compile_update, handshake_twin
 from kfpga.hw.storage import m4k_blocks
 
 __all__ = ["FoldedCore", "encode", "make_core", "word_layout"]
@@ -97,6 +97,14 @@ class FoldedCore(Core):
         self.program = program or compile_update(config, variant, channels=channels,
                                                  channel_bits=len(self.i.payload.channel))
 
+    def formal_twin(self):
+        """The core on a short copy of its program (:func:`kfpga.hw.microcode.handshake_twin`): the
+        same handshake, whole updates within a bounded check's reach."""
+        from kfpga.hw.generate import figures_only
+
+        figures_only(self)  # the twin is built instead of this core
+        return FoldedCore(self.config, self.variant, channels=self.channels, program=handshake_twin(self.program))
+
     @property
     def load_cycles(self):
         """Cycles before the handshake that write the sample's digits but the last (the input word
@@ -116,7 +124,7 @@ class FoldedCore(Core):
     @property
     def startup_cycles(self):
         """Cycles after reset before the first sample is taken (every channel's reset state written)."""
-        return self.channels * self.program.init_cycles
+        return 1 + self.channels * self.program.init_cycles  # a cycle to fetch the first word
 
     @property
     def m4k_blocks(self):
@@ -133,6 +141,7 @@ class FoldedCore(Core):
         b.accumulate()
         b.write()
         b.schedule()
+        self.parts = b  # the signals of the last elaboration, for a bench that looks inside
         return b.m
 
 
@@ -201,9 +210,12 @@ class _Build:
         self.loop_left = Signal(range(count_max), name="loop_left", reset_less=True)  # iterations after this one
         self.running = Signal(init=1, name="running")
         self.ending = Signal(name="ending")
+        # the program memory's read register holds no word after reset: the first cycle fetches one
+        primed = Signal(name="primed")
+        m.d.sync += primed.eq(1)
         self.issue, self.last, self.finished = Signal(name="issue"), Signal(name="last"), Signal(name="finished")
         m.d.comb += [self.fetch_port.addr.eq(self.pc_next), self.fetch_port.en.eq(1),
-                     self.issue.eq(self.running & (self.waiting == 0) & ~self.ending),
+                     self.issue.eq(self.running & primed & (self.waiting == 0) & ~self.ending),
                      self.finished.eq(self.ending & (self.waiting == 1))]
         back = (self.word["loop"] == END) & (self.loop_left != 0)
         m.d.comb += [self.pc_next.eq(self.pc), self.last.eq(self.issue & self.word["end"] & ~back)]

@@ -32,7 +32,7 @@ def filter_core(config=None, *, filter=None, variant=None, channels=1, architect
     channels:
         Channel states, 1..the core's limit (samples carry their channel number).
     architecture:
-        ``"parallel"`` or ``"sequential"`` (default: the parallel core where it runs the variant);
+        ``"parallel"`` or ``"folded"`` (default: the parallel core where it runs the variant);
         ``stages``: the register stages of a parallel loop.
     """
     from kfpga.core.config import FilterConfig

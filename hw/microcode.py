@@ -50,7 +50,7 @@ from kfpga.core.fixed import Overflow, Rounding, shift_round
 from kfpga.core.ops import Fx, Ops, quotient_bits
 
 __all__ = ["DIGIT", "WORD", "KEEP", "SHIFT", "CLEAR", "LO", "HI", "OUT", "Mac", "FoldOps", "Program", "compile_update",
-           "execute", "digits_for", "READ_LATENCY", "FLAG_LATENCY"]
+           "execute", "digits_for", "handshake_twin", "READ_LATENCY", "FLAG_LATENCY"]
 
 #: Bits a lower digit carries, and the register file's word.
 DIGIT, WORD = 17, 18
@@ -835,6 +835,45 @@ def _place(config, init_code, update_code, low, state_digits, chunks, channels, 
                    [(name, dgt, addr[("u", name, dgt)]) for name, dgt in samples], chunks, acc_bits, depth, channels,
                    update_cycles, init_cycles, tuple(o.name for o in config.outputs), input_digits,
                    {v: addr[("k", v)] for v in consts}, addr, {i: v.addrs for i, v in low.vals.items()}, low.nodes)
+
+
+def handshake_twin(program):
+    """A short copy of ``program`` for the formal stream checks of its core.
+
+    The folded core's handshake (write a sample's digits, take the word, run the routine, give
+    the estimate; after reset the reset routine for every channel) does not depend on what its
+    steps compute, only on how many digits a sample has and how long each routine runs. The twin
+    keeps the sample's digits, the output chunks and the channels, and runs a reset routine of one
+    step and an update of three (a sample's digit into an output chunk, the sample's flag, a
+    state write), on a register file of a few words, so that a bounded check covers whole updates
+    from reset."""
+    import dataclasses
+
+    consts = {0: 0, 1: 1}
+    samples = [(name, dgt, 2 + j) for j, (name, dgt, _) in enumerate(program.sample_addrs)]
+    state_bits = 1
+    region = (program.channels + 1) << state_bits
+    base = 1 << max(2 + len(samples) - 1, region - 1, 1).bit_length()
+
+    def word(a, b, **kw):
+        w = {"a": a, "b": b, "a2": a, "acc": CLEAR, "pred": 0, "wr": NONE, "d": 0, "cap": NONE, "flag": 0, "bit16": 0,
+             "ovf": 0, "loop": NONE, "count": 0, "end": 0}
+        w.update(kw)
+        return w
+
+    init = [word(0, 1, wr=HI, d=base, end=1)]
+    update = [word(samples[0][2], 1, wr=OUT, d=0), word(samples[0][2], 1, cap=SET, ovf=1),
+              word(0, 1, wr=HI, d=base, end=1)]
+    for part in (init, update):
+        for w, wait in zip(part, _schedule(part), strict=True):
+            w["wait"] = wait
+    words = init + update
+    depth = base + region
+    image = [0] * depth
+    image[1] = 1
+    return dataclasses.replace(program, words=words, init=image, init_steps=1, state_base=base, state_bits=state_bits,
+                               sample_addrs=samples, update_cycles=_cycles(update), init_cycles=_cycles(init),
+                               depth=depth, consts=consts, addresses={}, values={}, nodes=[])
 
 
 def _resolve(mac, addr):

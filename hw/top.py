@@ -228,7 +228,7 @@ class FilterSystem(wiring.Component):
     out_field:
         The output field on ``out_data`` (default: the filter's, ``x1`` for the paper's).
     architecture, stages:
-        The core's: ``parallel`` or ``sequential`` (default: the parallel core where it runs), and
+        The core's: ``parallel`` or ``folded`` (default: the parallel core where it runs), and
         the register stages of a pipelined loop (default: the core's).
     prefilter:
         ``None``, or the :class:`~kfpga.core.config.FilterConfig` of a filter that can stand before

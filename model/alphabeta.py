@@ -168,7 +168,7 @@ def _initial(params):
 VARIANTS = {
     "steady": Variant("steady", "constant gains alpha, beta: one update per sample, no multiplier for a power-of-two gain",
                       lambda params: (("x1", "x1"), ("v", "v"), *start.start_state(params)), _constants, _initial,
-                      update),  # every core runs the start: the loop's (hw/cvloop.py) and the sequential one
+                      update),  # every core runs the start: the loop's (hw/cvloop.py) and the folded one
 }
 
 

@@ -653,15 +653,15 @@ def _full_settled(params):
 
 def _full_hardware(params):
     """Whether the parallel time-varying core runs these parameters: one observation, and F's
-    entries 0 or +-2**k (its products by F are shifts); the sequential core runs any."""
+    entries 0 or +-2**k (its products by F are shifts); the folded core runs any."""
     if params.m != 1:
-        return (f"the parallel time-varying core takes one observation, not {params.m}: the sequential core runs "
+        return (f"the parallel time-varying core takes one observation, not {params.m}: the folded core runs "
                 "this model")
     for i, row in enumerate(params.F):
         for j, v in enumerate(row):
             if not free(v):
                 return (f"model.F[{i}][{j}] = {v!r}: the parallel time-varying core needs F's entries to be 0 or "
-                        "+-2**k (its products by F are shifts); the sequential core runs this model")
+                        "+-2**k (its products by F are shifts); the folded core runs this model")
     return None
 
 

@@ -537,7 +537,7 @@ def _random_params(rng):
 
 
 def _goals(config, variant, channels=1):
-    """The sequential core's: one multiplier of the widest product (a window's sums by its
+    """The folded core's: one multiplier of the widest product (a window's sums by its
     constants: up to 2 x 2 embedded multipliers), the program and the registers in block memory,
     4,000 logic cells for the adder, the shifter, the multiplier's operands and their multiplexers
     (the words are as wide as the widest exact value, a window's slope before it is rounded: 58
@@ -578,10 +578,10 @@ VARIANTS = {
 
 
 def _mutation():
-    """``make mutate``: the sequential core of the front end on 120 stress samples."""
+    """``make mutate``: the folded core of the front end on 120 stress samples."""
     from kfpga.core.config import FilterConfig
 
-    return [MutationBlock("sequential core (lsfront)", FilterConfig(filter=SPEC.name), "steady", {"samples": 120})]
+    return [MutationBlock("folded core (lsfront)", FilterConfig(filter=SPEC.name), "steady", {"samples": 120})]
 
 
 SPEC = FilterSpec(

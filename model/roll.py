@@ -586,7 +586,7 @@ def _default_formats(params, ranges, *, operand_bits, state_frac, max_word=MAX_W
     # the innovation as fine as the angle: the gain of the angle is close to 1 (s = 100 keeps the
     # prediction covariance far above R), so e's rounding goes into every prediction undamped
     # (0.013 deg rms with whole codes, 0.0002 with x1's fraction bits); its product is on the
-    # sequential core's one multiplier, which the squares of D already make wider than 18 bits
+    # folded core's one multiplier, which the squares of D already make wider than 18 bits
     e, x1 = formats["e"], formats["x1"]
     formats["e"] = QFormat(e.int_bits, max(e.frac_bits, x1.frac_bits), e.rounding, e.overflow)
     # the plain form's covariance is a multiplier operand (K P, s A P A^T): within the word budget,
@@ -608,7 +608,7 @@ def _random_params(rng):
 
 
 def _goals(config, variant, channels=1):
-    """The sequential core's: one multiplier of the widest product (its squares of D take 2 x 2
+    """The folded core's: one multiplier of the widest product (its squares of D take 2 x 2
     embedded multipliers), the program and the registers in block memory, 5,000 logic cells for
     the units and their multiplexers; every path within one cycle of the 50 MHz system clock (an
     update every half second leaves no reason to pipeline it further)."""

@@ -16,7 +16,7 @@ for a rate, for gains that trust the start from the first update).
 The samples of the start are counted in a 2-bit state ``start``: 0 before the first sample,
 1 before the second, -1 from then on (reset sets it to 0 with the other states). Two
 comparisons and a multiplexer per state written by the start: no divider, no extra multiplier
-in the program of the sequential core, which runs it; the parallel cores, hand-pipelined for
+in the program of the folded core, which runs it; the parallel cores, hand-pipelined for
 one update form, refuse it.
 """
 
@@ -78,8 +78,8 @@ def start_samples(params):
 def hardware(params):
     """Why the parallel core cannot run these parameters' start, or ``None``."""
     if measured(params):
-        return ('model.init = "measurement": the start from the first samples runs on the sequential core '
-                "(--architecture sequential); the parallel cores start from x0")
+        return ('model.init = "measurement": the start from the first samples runs on the folded core '
+                "(--architecture folded); the parallel cores start from x0")
     return None
 
 

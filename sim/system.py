@@ -523,7 +523,7 @@ def cycle_budget(built, records, samples):
 def cycles_allowed(config, variant, samples, *, six=False, sensors=1, reads=1, core_options=None):
     """System cycles a run of ``samples`` estimates may take before it is stopped: generous, as a
     conversion with one read takes 230 system cycles, six reads 380 (for six estimates); a core
-    slower than that (the sequential core: hundreds of cycles an update) paces the reads, and gets
+    slower than that (the folded core: hundreds of cycles an update) paces the reads, and gets
     twice its own; a conversion timer adds its period to each conversion."""
     from kfpga.hw.generate import figures_only
 

@@ -99,10 +99,10 @@ CASES = [
      {"k.toml": '[formats.x1]\nformat = "Q30.10"\n[formats.xl1]\nformat = "Q30.10"\n'}, None),
     ("va2-full-generate", ["generate", "--preset", "va2", "--variant", "full", "--architecture", "parallel",
                            "--out", "o"], {},
-     "--architecture parallel: the parallel time-varying core takes one observation, not 2: the sequential core "
+     "--architecture parallel: the parallel time-varying core takes one observation, not 2: the folded core "
      "runs this model"),
     ("va2-full-simulate", ["simulate", "--preset", "va2", "--variant", "full", "--architecture", "parallel"], {},
-     "--architecture parallel: the parallel time-varying core takes one observation, not 2: the sequential core "
+     "--architecture parallel: the parallel time-varying core takes one observation, not 2: the folded core "
      "runs this model"),
     ("pins-write-dir", ["pins", "--write", "d"], {"d/x": ""}, "--write d: is a directory; give a file name"),
     ("formats-toml-and-json", ["formats", "--toml", "--json"], {}, "--toml and --json are two ways to print the same: choose one"),

@@ -94,12 +94,12 @@ def test_time_varying_core_takes_at_most_200_cycles_for_three_states():
     assert dut.cycles_per_update <= 200
 
 
-def test_two_observations_run_on_the_sequential_core_only_for_the_time_varying_variant():
+def test_two_observations_run_on_the_folded_core_only_for_the_time_varying_variant():
     config = preset_config("va2")
     with pytest.raises(ValueError, match=r"^the parallel time-varying core takes one observation, not 2: the "
-                                         r"sequential core runs this model$"):
+                                         r"folded core runs this model$"):
         FullCore(config)
-    assert config.spec.architectures("full", config.params) == ("sequential",)
+    assert config.spec.architectures("full", config.params) == ("folded",)
 
 
 def test_steady_loop_stages():

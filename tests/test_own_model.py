@@ -108,10 +108,10 @@ def test_scenarios_follow_the_model_and_stay_in_range(seed):
         scenarios.check_rails("s", np.full(100, 32767))
 
 
-def test_the_time_varying_tracker_runs_on_the_sequential_core():
+def test_the_time_varying_tracker_runs_on_the_folded_core():
     config = MODELS["3-state T=0.01"]
-    assert config.spec.architectures("full", config.params) == ("sequential",)
-    assert "sequential core runs" in config.spec.why_not("full", config.params, "parallel")
+    assert config.spec.architectures("full", config.params) == ("folded",)
+    assert "folded core runs" in config.spec.why_not("full", config.params, "parallel")
 
 
 @pytest.mark.cosim
@@ -121,10 +121,10 @@ def test_the_time_varying_tracker_is_bit_exact(simulator, seed):
     need(simulator)
     config = MODELS["3-state T=0.01"]
     _, y = scenarios.for_config("model", 60, seed, config)
-    result = run(build(simulator, "core", config=config, variant="full", channels=2, architecture="sequential"),
+    result = run(build(simulator, "core", config=config, variant="full", channels=2, architecture="folded"),
                  "test_core", testcase="core_bit_exact",
                  params={"variant": "full", "seed": seed, "codes": [int(c) for c in y], "channels": 2, "p_idle": 0.2,
-                         "p_ready": 0.7, "config_toml": config.to_toml(), "architecture": "sequential"},
+                         "p_ready": 0.7, "config_toml": config.to_toml(), "architecture": "folded"},
                  tag="own-model-tracker")
     assert result["ok"] and result["mismatches"] == 0 and result["samples"] == 60, result.get("first_mismatches")
 
@@ -179,7 +179,7 @@ def test_generate_chooses_a_design_that_meets_the_clock(at_100_hz, capsys, tmp_p
 def test_explore_lists_the_candidates(at_100_hz, capsys):
     assert main(["explore", "--config", str(at_100_hz), "--json", "--quiet"]) == 0
     found = json.loads(capsys.readouterr().out)
-    assert len(found) >= 2 and {c["architecture"] for c in found} == {"parallel", "sequential"}
+    assert len(found) >= 2 and {c["architecture"] for c in found} == {"parallel", "folded"}
     chosen = [c for c in found if c["chosen"]]
     assert len(chosen) == 1 and chosen[0]["meets"]
     assert chosen[0]["logic_cells"] == min(c["logic_cells"] for c in found if c["meets"])

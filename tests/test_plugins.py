@@ -167,7 +167,7 @@ TOY = FilterSpec(
         TOY, params, list(TOY_VARIANTS.values()), full_scale_stimulus(params.R) if stimulus is None else stimulus),
     validate=lambda config: None,
     reference=toy_reference,
-    core=None,  # no parallel core of its own: the sequential core runs it
+    core=None,  # no parallel core of its own: the folded core runs it
     goals=lambda config, variant, channels=1: {"logic_cells": 3000, "mul18": 4},
     default_output="x",
     random_params=lambda rng: ToyParams(alpha=float(rng.uniform(0.05, 0.9))),
@@ -207,9 +207,9 @@ def test_a_toy_filter_gets_the_generic_commands(toy, tmp_path, capsys, seed):
 def test_a_toy_filter_passes_the_contract(toy, tmp_path, seed):
     from tests.contract import test_contract as contract
 
-    assert TOY.architectures("steady", ToyParams()) == ("sequential",)
+    assert TOY.architectures("steady", ToyParams()) == ("folded",)
     contract.test_model_equals_the_exact_rational_spec("toy", "steady", seed)
     for channels in (1, 3):
-        contract.test_rtl_equals_model_with_backpressure("toy", "steady", "sequential", channels, seed)
-    contract.test_declared_latency_and_cycles_per_update_are_measured("toy", "steady", "sequential")
-    contract.test_generated_verilog_parses_and_lints("toy", "steady", "sequential", tmp_path)
+        contract.test_rtl_equals_model_with_backpressure("toy", "steady", "folded", channels, seed)
+    contract.test_declared_latency_and_cycles_per_update_are_measured("toy", "steady", "folded")
+    contract.test_generated_verilog_parses_and_lints("toy", "steady", "folded", tmp_path)

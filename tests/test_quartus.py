@@ -243,8 +243,8 @@ def test_ecp5_place_and_route_agrees_the_loop_is_short(capsys):
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("name", "mul18", "words"), [("roll", 4, 64 * 54), ("lsfront", 2, 256 * 58)])
-def test_the_sequential_cores_meet_their_goals(capsys, name, mul18, words):
-    """The square-root roll predictor and the least-squares front end on the sequential core:
+def test_the_folded_cores_meet_their_goals(capsys, name, mul18, words):
+    """The square-root roll predictor and the least-squares front end on the folded core:
     within one 50 MHz cycle on the -8 part (their goal: an update every half second or every
     second needs no more), the multiplier's blocks, the program and registers in block memory."""
     assert main(["resources", "--filter", name, "--json", "--quiet"]) == 0

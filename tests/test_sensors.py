@@ -4,7 +4,7 @@ core keeps one state per sensor, and out_channel names the sensor.
 
 The expected outputs here come from the model run on each sensor's samples alone, not from the
 co-simulation's scoreboard; the hardware runs are bit-exact on both simulators, for the
-parallel and the sequential core, and the multiplexer select is checked at every HOLD."""
+parallel and the folded core, and the multiplexer select is checked at every HOLD."""
 
 import json
 import tomllib
@@ -165,7 +165,7 @@ def test_simulate_refuses_what_has_no_multiplexer(capsys, ab100):
 DESIGNS = {
     "kalman2-16": ("kalman2", 16, "parallel", {"verilator": 640, "icarus": 160}),
     "alphabeta-64-at-100Hz": ("alphabeta", 64, "parallel", {"verilator": 640, "icarus": 128}),
-    "kalman2-9-sequential": ("kalman2", 9, "sequential", {"verilator": 270, "icarus": 90}),
+    "kalman2-9-folded": ("kalman2", 9, "folded", {"verilator": 270, "icarus": 90}),
 }
 
 

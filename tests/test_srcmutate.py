@@ -119,7 +119,7 @@ def test_the_designs_take_the_branches_the_defaults_do_not(tmp_path):
     designs, why = elaborate(Path.cwd(), tmp_path)
     assert designs is not None, why
     for name in ("kalman2-T0.3-full-parallel", "kalman2-T0.3-steady-parallel", "kalman-tracker-T0.01-steady-parallel",
-                 "kalman-tracker-T0.01-full-sequential", "kalman-ca3-steady-parallel", "alphabeta-ab-bb-steady-parallel",
+                 "kalman-tracker-T0.01-full-folded", "kalman-ca3-steady-parallel", "alphabeta-ab-bb-steady-parallel",
                  "tukey53h-53h-attitude-online-parallel", "top-rate", "kalman-ca3-x0-steady-parallel-9"):
         assert name in designs, name
 

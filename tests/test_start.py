@@ -1,6 +1,6 @@
 """A start from the first measurements (``[model] init = "measurement"``, model/start.py): the
 positions from the first sample, the rates from the first two, in the float filter, the model and
-the sequential core, bit-exact; the parallel cores refuse it; compare says how long the start-up
+the folded core, bit-exact; the parallel cores refuse it; compare says how long the start-up
 took."""
 
 import dataclasses
@@ -121,23 +121,23 @@ PARALLEL_STARTS = {("kalman2", "steady"), ("alphabeta", "steady")}
 @pytest.mark.parametrize("key", STARTS)
 def test_which_cores_run_it(key):
     """The constant-gain loop runs the start; the other parallel cores (hand-pipelined for one
-    update form) refuse it, and the sequential core runs every one."""
+    update form) refuse it, and the folded core runs every one."""
     name, params, _, _ = STARTS[key]
     config = FilterConfig(filter=name, params=params)
     for variant in config.spec.variants:
         if (key, variant) in PARALLEL_STARTS:
-            assert config.spec.architectures(variant, params) == ("parallel", "sequential")
+            assert config.spec.architectures(variant, params) == ("parallel", "folded")
             continue
-        assert config.spec.architectures(variant, params) == ("sequential",)
+        assert config.spec.architectures(variant, params) == ("folded",)
         why = config.spec.why_not(variant, params, "parallel")
-        assert why.startswith('model.init = "measurement": the start from the first samples runs on the sequential')
+        assert why.startswith('model.init = "measurement": the start from the first samples runs on the folded')
 
 
 @pytest.mark.cosim
 @pytest.mark.parametrize("simulator", SIMULATORS)
 @pytest.mark.parametrize(("key", "variant", "architecture", "channels"),
-                         [("kalman", "full", "sequential", 2), ("kalman2", "steady", "sequential", 2),
-                          ("roll", "sqrt", "sequential", 2), ("kalman2", "steady", "parallel", 2),
+                         [("kalman", "full", "folded", 2), ("kalman2", "steady", "folded", 2),
+                          ("roll", "sqrt", "folded", 2), ("kalman2", "steady", "parallel", 2),
                           ("alphabeta", "steady", "parallel", 3), ("alphabeta", "steady", "parallel", 10)])
 def test_the_start_is_bit_exact_on_the_core(key, variant, architecture, channels, simulator, seed):
     """The core's generated Verilog against the model, several channels (each starts by itself;

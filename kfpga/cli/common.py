@@ -292,8 +292,8 @@ def add_design_args(p, channels_help):
                         "(--channel) through an analog multiplexer, its select on the mux_sel pins, each sensor its "
                         "own channel state")
     p.add_argument("--config", metavar="TOML", help="model parameters, formats and [board] rate")
-    p.add_argument("--architecture", choices=("auto", "parallel", "sequential"), default="auto",
-                   help="the core: parallel (the update over pipeline stages), sequential (one operation at a time), "
+    p.add_argument("--architecture", choices=("auto", "parallel", "folded"), default="auto",
+                   help="the core: parallel (the update over pipeline stages), folded (one multiply-accumulate step at a time), "
                         "or auto: the cheapest design whose estimated Fmax is at least 1.25 x the clock and whose "
                         "throughput covers the sample rate (see 'kfpga explore'; default: auto)")
     p.add_argument("--stages", type=positive_int, metavar="N",
@@ -386,7 +386,7 @@ def check_architecture(args, config):
     if stages is None:
         return
     if args.architecture != "parallel":
-        raise UsageError("--stages applies with --architecture parallel (the sequential core has no stages; auto "
+        raise UsageError("--stages applies with --architecture parallel (the folded core has no stages; auto "
                          "chooses them)")
     from kfpga.hw.generate import figures_only
 

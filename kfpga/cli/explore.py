@@ -9,7 +9,7 @@ def add_parser(sub):
     p = sub.add_parser("explore", help="every core design for a config: resources, estimated Fmax, throughput; the "
                                        "chosen one marked",
                        description="Synthesise every design of the filter's variant (its parallel core at each "
-                                   "pipeline depth, and the sequential core) with Yosys and list their logic cells, "
+                                   "pipeline depth, and the folded core) with Yosys and list their logic cells, "
                                    "multipliers, M4K bits, estimated Fmax on the -8 part, cycles per update and the "
                                    "updates a second they sustain, against what the board needs (the [board] "
                                    "sample rate on every channel, or the free-running ADC's). The chosen design, "

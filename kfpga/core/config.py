@@ -300,7 +300,7 @@ class FilterConfig:
 
     def require_hardware(self, variant, architecture=None):
         """Refuse a variant, or an architecture that cannot run it with these parameters (the
-        sequential core runs every variant)."""
+        folded core runs every variant)."""
         self.require_variant(variant)
         if architecture is not None:
             why = self.spec.why_not(variant, self.params, architecture)

@@ -15,14 +15,14 @@ from types import MappingProxyType
 from typing import NamedTuple
 
 __all__ = ["Point", "Output", "Variant", "FilterSpec", "Constant", "Evaluation", "Mode", "Prefilter", "MutationBlock",
-           "resolve", "ARCHITECTURES", "SEQUENTIAL_CORE"]
+           "resolve", "ARCHITECTURES", "FOLDED_CORE"]
 
 #: The architectures a core can have: ``parallel`` (a filter's own core: its update spread over
-#: pipeline stages, channels interleaved) and ``sequential`` (``hw/sequencer.py``: one operation at
-#: a time on one adder, one multiplier, one divider and one square root, the state in block memory).
-ARCHITECTURES = ("parallel", "sequential")
-#: The sequential core runs any update the operations layer writes: every filter and variant has it.
-SEQUENTIAL_CORE = "kfpga.hw.sequencer:make_core"
+#: pipeline stages, channels interleaved) and ``folded`` (``hw/folded.py``: the update as microcode,
+#: one multiply-accumulate step at a time on one 18 x 18 multiplier, the state in block memory).
+ARCHITECTURES = ("parallel", "folded")
+#: The folded core runs any update the operations layer writes: every filter and variant has it.
+FOLDED_CORE = "kfpga.hw.folded:make_core"
 
 
 def resolve(target):
@@ -127,7 +127,7 @@ class Variant:
         ``applies(params) -> None | why not``: whether these parameters can use the variant.
     hardware:
         ``hardware(params) -> None | why not``: whether the filter's parallel core runs the
-        variant with these parameters (the sequential core runs every variant).
+        variant with these parameters (the folded core runs every variant).
     settled:
         ``settled(params) -> [(label, value, point), ...]``: values the update settles to (the
         steady-state covariance of a time-varying gain), which, like the constants, their
@@ -303,7 +303,7 @@ class FilterSpec:
     core:
         The parallel core: ``"module:function"`` building it, ``f(config, variant, *, channels)``,
         imported only when hardware is asked for (the model never imports ``hw/``); ``None`` for
-        a filter that has only the sequential core (``SEQUENTIAL_CORE``), which every filter has.
+        a filter that has only the folded core (``FOLDED_CORE``), which every filter has.
     goals:
         ``goals(config, variant, channels) -> {"logic_cells": n, "mul18": n, "lut_levels": n}``: the
         resource goals of the core with ``channels`` channel states.
@@ -432,7 +432,7 @@ class FilterSpec:
     def architectures(self, variant, params):
         """The architectures that run ``variant`` with ``params``, the parallel one first when it can."""
         parallel = self.core is not None and self.variants[variant].hardware(params) is None
-        return ("parallel", "sequential") if parallel else ("sequential",)
+        return ("parallel", "folded") if parallel else ("folded",)
 
     def why_not(self, variant, params, architecture):
         """``None`` if ``architecture`` runs ``variant`` with ``params``, else why not."""
@@ -441,18 +441,18 @@ class FilterSpec:
         if architecture in self.architectures(variant, params):
             return None
         if self.core is None:
-            return f"the {self.name} filter has no parallel core: it runs on the sequential core"
+            return f"the {self.name} filter has no parallel core: it runs on the folded core"
         return self.variants[variant].hardware(params)
 
     def make_core(self, config, variant, *, channels=1, architecture=None, **options):
         """The Amaranth core of ``variant`` on ``architecture`` (default: the parallel core where it
-        runs, else the sequential one; the RTL module is imported on first use); ``options`` go to
+        runs, else the folded one; the RTL module is imported on first use); ``options`` go to
         the core (``stages=L`` for a pipelined loop)."""
         architecture = architecture or self.architectures(variant, config.params)[0]
         why = self.why_not(variant, config.params, architecture)
         if why:
             raise ValueError(why)
-        target = self.core if architecture == "parallel" else SEQUENTIAL_CORE
+        target = self.core if architecture == "parallel" else FOLDED_CORE
         return resolve(target)(config, variant, channels=channels, **options)
 
     def load_evaluation(self):

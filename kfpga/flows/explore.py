@@ -1,7 +1,7 @@
 """``kfpga explore``: every design the tool can build for a config, and the one it chooses.
 
 A filter's update runs on its parallel core (the update spread over L register stages, channels
-interleaved; L from 1 to what the core allows) or on the sequential core (one operation at a
+interleaved; L from 1 to what the core allows) or on the folded core (one operation at a
 time; every filter has it). Each candidate is synthesised with Yosys (``hw/resources.py``) for
 its logic cells, multipliers, block-memory bits and estimated Fmax on the -8 part, and its
 throughput comes from its cycles per update. The board needs ``sample_rate_hz`` updates a second
@@ -111,7 +111,7 @@ def _designs(config, variant, channels):
     spec = config.spec
     out = []
     for architecture in spec.architectures(variant, config.params):
-        if architecture == "sequential":
+        if architecture == "folded":
             out.append((architecture, None, figures_only(spec.make_core(config, variant, channels=channels,
                                                                         architecture=architecture))))
             continue

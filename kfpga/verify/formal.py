@@ -72,7 +72,7 @@ def _cores():
             if spec.variants[variant].hardware(config.params):
                 continue
             core = figures_only(spec.make_core(config, variant))  # each job makes its own
-            twin = hasattr(core, "formal_twin")  # a core whose handshake a shorter twin has (hw/sequencer.py)
+            twin = hasattr(core, "formal_twin")  # a core whose handshake a shorter twin has (hw/folded.py)
             if twin:
                 core = figures_only(core.formal_twin())
 
@@ -220,7 +220,7 @@ opt_clean
 """
 
 #: Each job: the property (BMC or k-induction) and its covers, with Yices; a job of control
-#: logic (the controller, a sequential core's handshake twin) has its harness synthesised to
+#: logic (the controller, a folded core's handshake twin) has its harness synthesised to
 #: gates first (smtbmc's ``--syn``: a quarter to two thirds of the time), a core's datapath not
 #: (its arithmetic bit-blasted takes the solver longer).
 SBY = """[tasks]

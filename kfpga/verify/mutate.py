@@ -83,7 +83,7 @@ def blocks():
     # operand, where the core's bench reaches few of them
     widths = divider_widths()
     # each filter's cores on the core bench (its spec's ``mutation``); their formal harnesses hold
-    # other instances (the defaults' widths and channels, narrow formats, the sequential core's
+    # other instances (the defaults' widths and channels, narrow formats, the folded core's
     # handshake twin), where this instance's cells are not, so no property kills here
     cores = []
     for spec in registry.specs():

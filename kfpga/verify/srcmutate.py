@@ -56,7 +56,7 @@ ROOT = Path("build") / "mutate" / "source"
 #: The tests whose coverage says which test runs which line (the fast, Amaranth-simulator ones).
 POOL = ["tests/contract/test_streams.py", "tests/contract/test_contract.py", "tests/test_hw_kalman.py",
         "tests/test_hw_kalman2.py", "tests/test_hw_divider.py", "tests/test_hw_top.py", "tests/test_hw_clockdiv.py",
-        "tests/test_hw_ads8364.py", "tests/test_hw_sequencer.py", "tests/test_hw_alphabeta.py", "tests/test_hw_tukey53h.py",
+        "tests/test_hw_ads8364.py", "tests/test_hw_folded.py", "tests/test_hw_alphabeta.py", "tests/test_hw_tukey53h.py",
         "tests/test_sensors.py", "tests/test_hw_generate.py"]
 #: What the first pass leaves out: the co-simulations (their lines are run by the Amaranth tests too).
 POOL_MARKS = "not cosim and not slow"
@@ -330,11 +330,9 @@ from kfpga.core import registry
 from kfpga.core.config import FilterConfig
 from kfpga.hw.alphabeta import TrackerCore
 from kfpga.hw.divider import Divider
-from kfpga.hw.sqrt import SquareRoot
 from kfpga.hw.top import FilterSystem
 out = sys.argv[1]
 designs = {"divider": lambda: Divider(dividend_bits=12, divisor_bits=6, quotient_bits=7),
-           "sqrt": lambda: SquareRoot(radicand_bits=16),
            "tracker3": lambda: TrackerCore(FilterConfig(filter="alphabeta"), tracks=3),
            "top": lambda: FilterSystem(FilterConfig())}
 for spec in registry.specs():
@@ -552,7 +550,7 @@ def _parser():
                     "Mux operands, dropped statements, inverted conditions), each run against the tests that execute "
                     "its line; survivors checked for equivalence with Yosys. Writes build/mutate/source/report.json "
                     "and prints the score per file (goal: >= 95 percent).",
-        epilog="example: python -m kfpga.verify.srcmutate --mutants 3 --seed 1 --only sqrt")
+        epilog="example: python -m kfpga.verify.srcmutate --mutants 3 --seed 1 --only divider")
     parser.add_argument("--mutants", type=int, default=3, help="mutants per file (default 3)")
     parser.add_argument("--seed", type=int, default=1, help="seed of the sites' draw (default 1)")
     parser.add_argument("--only", metavar="TEXT", help="the files whose name contains TEXT (several: a,b,c)")

@@ -14,7 +14,7 @@ A new filter gets all of it by registering (``kfpga/core/registry.py``):
    state holds while the core waits (the first sample 0..3 idle cycles after a reset);
 7. the whole design (clock divider, ADS8364 controller, core) is bit-exact on both simulators.
 
-A core that takes many cycles per update (the sequential core of a slow filter) runs fewer
+A core that takes many cycles per update (the folded core of a slow filter) runs fewer
 samples in the simulations: as many as :data:`CYCLE_BUDGET` cycles take, at least
 :data:`MIN_SAMPLES`.
 """
@@ -46,7 +46,7 @@ CYCLE_BUDGET, MIN_SAMPLES = 150_000, 100
 
 CASES = [pytest.param(spec.name, variant, id=f"{spec.name}-{variant}")
          for spec in registry.specs() for variant in spec.variants]
-#: Every variant on every architecture that runs it with its default parameters (the sequential
+#: Every variant on every architecture that runs it with its default parameters (the folded
 #: core runs every variant).
 HW_CASES = [pytest.param(spec.name, variant, architecture, id=f"{spec.name}-{variant}-{architecture}")
             for spec in registry.specs() for variant in spec.variants

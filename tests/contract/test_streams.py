@@ -29,7 +29,6 @@ from test_contract import HW_CASES, codes
 from kfpga.core.config import FilterConfig
 from kfpga.hw.alphabeta import TrackerCore
 from kfpga.hw.divider import Divider
-from kfpga.hw.sqrt import SquareRoot
 from kfpga.sim.amaranth_streams import AFTER_VALID, check_liveness, run_core, run_stream
 
 COUNTS = [1, 2, 3, 4, 5, 256]
@@ -108,10 +107,6 @@ UNITS = {
                       lambda r: {"dividend": r.randrange(1 << 5), "divisor": r.randrange(1 << 5)},
                       lambda p: _divide(p["dividend"], p["divisor"], 5),
                       lambda o: (int(o.quotient), int(o.overflow))),
-    "sqrt-16": (lambda: SquareRoot(radicand_bits=16), lambda r: {"radicand": r.randrange(1 << 16)},
-                lambda p: math.isqrt(p["radicand"]), lambda o: int(o.root)),
-    "sqrt-2": (lambda: SquareRoot(radicand_bits=2), lambda r: {"radicand": r.randrange(4)},
-               lambda p: math.isqrt(p["radicand"]), lambda o: int(o.root)),
 }
 
 
