@@ -207,7 +207,7 @@ class _Build:
         count_max = max([w["count"] for w in p.words if w["loop"] == BEGIN] + [1])
         # datapath and operand registers have no reset (what they hold is read only where a valid
         # bit, reset, says so): the multiplier's own registers have none, and the rest costs less
-        self.loop_left = Signal(range(count_max), name="loop_left", reset_less=True)  # iterations after this one
+        self.loop_left = Signal(range(max(count_max, 2)), name="loop_left", reset_less=True)  # iterations after this
         self.running = Signal(init=1, name="running")
         self.ending = Signal(name="ending")
         # the program memory's read register holds no word after reset: the first cycle fetches one
@@ -217,13 +217,12 @@ class _Build:
         m.d.comb += [self.fetch_port.addr.eq(self.pc_next), self.fetch_port.en.eq(1),
                      self.issue.eq(self.running & primed & (self.waiting == 0) & ~self.ending),
                      self.finished.eq(self.ending & (self.waiting == 1))]
-        back = (self.word["loop"] == END) & (self.loop_left != 0)
-        m.d.comb += [self.pc_next.eq(self.pc), self.last.eq(self.issue & self.word["end"] & ~back)]
+        self.back = back = (self.word["loop"] == END) & (self.loop_left != 0)
+        m.d.comb += self.last.eq(self.issue & self.word["end"] & ~back)
         m.d.sync += self.pc.eq(self.pc_next)
         with m.If(self.issue):
             # the last step's write is READ_LATENCY - 1 cycles on
             m.d.sync += self.waiting.eq(Mux(self.last, READ_LATENCY - 1, self.word["wait"]))
-            m.d.comb += self.pc_next.eq(Mux(back, self.word["d"], self.pc + 1))
             with m.If(self.word["loop"] == BEGIN):
                 m.d.sync += self.loop_left.eq(self.word["d"])
             with m.Elif(back):
@@ -322,8 +321,13 @@ class _Build:
         idle = ~self.running
         # ready does not follow valid within a cycle: it is high once the other digits are written
         m.d.comb += core.i.ready.eq(idle & free & last_digit)
-        with m.If(idle & core.i.valid & free):
-            m.d.comb += self.sample_write.eq(1)
+        # plain assignments (Verilog `assign`), not outputs of case statements: no simulator can leave
+        # them undefined at time zero while their inputs have not changed yet
+        restart = initializing & (self.channel != core.channels - 1)  # the next channel's reset routine
+        m.d.comb += [self.sample_write.eq(idle & core.i.valid & free),
+                     self.pc_next.eq(Mux(self.issue, Mux(self.back, self.word["d"], self.pc + 1),
+                                         Mux(self.finished, Mux(restart, 0, self.update_start), self.pc)))]
+        with m.If(self.sample_write):
             m.d.sync += self.load.eq(self.load + 1)
             with m.If(last_digit):  # the last digit: the word is taken, the update runs
                 m.d.sync += [self.channel.eq(core.i.payload.channel), self.fo.eq(0), self.load.eq(0),
@@ -334,13 +338,10 @@ class _Build:
             m.d.sync += self.ending.eq(0)
             with m.If(~initializing):
                 m.d.sync += [core.o.valid.eq(1), self.running.eq(0)]
-                m.d.comb += self.pc_next.eq(self.update_start)
-            with m.Elif(self.channel == core.channels - 1):  # every channel's reset state written
+            with m.Elif(~restart):  # every channel's reset state written
                 m.d.sync += [self.channel.eq(0), initializing.eq(0), self.running.eq(0)]
-                m.d.comb += self.pc_next.eq(self.update_start)
             with m.Else():  # the next channel's
                 m.d.sync += self.channel.eq(self.channel + 1)
-                m.d.comb += self.pc_next.eq(0)
 
     def sample_port(self):
         """The register file's write port for a sample's digits: ``(enable, address, data)``, the

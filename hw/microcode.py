@@ -799,7 +799,7 @@ def _place(config, init_code, update_code, low, state_digits, chunks, channels, 
     temp_base = len(consts) + len(samples)
     temps = _allocate(update_code, temp_base)
     addr.update(temps)
-    top = max(list(addr.values()) + [0]) + 1
+    top = max([*addr.values(), 0]) + 1
     offsets, j = {}, 0
     for name, n in state_digits.items():
         for dgt in range(n):
@@ -829,7 +829,7 @@ def _place(config, init_code, update_code, low, state_digits, chunks, channels, 
         for w, wait in zip(part, _schedule(part), strict=True):
             w["wait"] = wait
     acc_bits = _acc_bits(code, low)
-    init_cycles = sum(1 + w["wait"] for w in words[:len(init_code)])
+    init_cycles = _cycles(words[:len(init_code)])
     update_cycles = _cycles(words[len(init_code):])
     return Program(words, init, len(init_code), state_base, state_bits,
                    [(name, dgt, addr[("u", name, dgt)]) for name, dgt in samples], chunks, acc_bits, depth, channels,
@@ -886,43 +886,44 @@ def _resolve(mac, addr):
             "bit16": int(mac.bit16), "ovf": int(mac.ovf), "loop": mac.loop, "count": mac.count, "end": 0}
 
 
-def _allocate(code, base):
-    """Registers for the temporary digits, each reused once its last reader has read it (a
-    digit written inside a loop lives through the loop)."""
-    first, last = {}, {}
-    loop_start = None
-    spans = []
+def _lifetimes(code):
+    """``(first, last)``: the step that first uses each temporary digit, and the last; a digit used
+    inside a loop lives through the whole loop (its registers are not reused there)."""
+    first, last, spans, start = {}, {}, [], None
     for pos, mac in enumerate(code):
         if mac.loop == BEGIN:
-            loop_start = pos
+            start = pos
         for x in (mac.a, mac.b, mac.a2, mac.d if mac.wr in (LO, HI) else None):
             if x is not None and x[0] == "t":
                 first.setdefault(x, pos)
                 last[x] = pos
         if mac.loop == END:
-            spans.append((loop_start, pos))
-    for x in first:  # a digit used inside a loop lives through the whole loop
+            spans.append((start, pos))
+    for x in first:
         for lo, hi in spans:
             if first[x] <= hi and last[x] >= lo:
                 first[x], last[x] = min(first[x], lo), max(last[x], hi)
-    ends = {}
-    for x, p in last.items():
-        ends.setdefault(p, []).append(x)
-    starts = {}
+    return first, last
+
+
+def _allocate(code, base):
+    """Registers for the temporary digits from ``base`` on, each reused once its last reader has
+    read it (a freed register is written again no sooner than the next step, whose write comes
+    after the last read in the pipeline; with :data:`REUSE` off each digit keeps its own)."""
+    first, last = _lifetimes(code)
+    starts, ends = {}, {}
     for x, p in first.items():
         starts.setdefault(p, []).append(x)
+    for x, p in last.items():
+        ends.setdefault(p, []).append(x)
     free, nxt, out = [], base, {}
-    if not REUSE:
-        free = None
     for pos in range(len(code)):
         for x in sorted(starts.get(pos, [])):
             if free:
                 out[x] = free.pop()
             else:
                 out[x], nxt = nxt, nxt + 1
-        # freed after this step's reads and its write (a freed register is written no sooner than
-        # READ_LATENCY steps later by the schedule's own rule)
-        if free is not None:
+        if REUSE:
             free.extend(sorted(out[x] for x in ends.get(pos, [])))
     return out
 

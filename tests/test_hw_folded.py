@@ -131,7 +131,7 @@ def test_a_channel_past_the_last_reads_zeros_and_updates_nothing(seed):
         np.testing.assert_array_equal(got[idx], result.outputs["x1"])
     model = FixedModel(config, variant="steady")
     zero = model.initial_state()
-    zero = dataclasses.replace(zero, values={name: 0 for name in zero.values})
+    zero = dataclasses.replace(zero, values=dict.fromkeys(zero.values, 0))
     stray = np.flatnonzero(channels == 3)
     assert stray.size
     for i in stray:

@@ -293,9 +293,10 @@ def add_design_args(p, channels_help):
                         "own channel state")
     p.add_argument("--config", metavar="TOML", help="model parameters, formats and [board] rate")
     p.add_argument("--architecture", choices=("auto", "parallel", "folded"), default="auto",
-                   help="the core: parallel (the update over pipeline stages), folded (one multiply-accumulate step at a time), "
-                        "or auto: the cheapest design whose estimated Fmax is at least 1.25 x the clock and whose "
-                        "throughput covers the sample rate (see 'kfpga explore'; default: auto)")
+                   help="the core: parallel (the update over pipeline stages), folded (one multiply-accumulate step "
+                        "at a time, from microcode), or auto: the cheapest design whose estimated Fmax is at least "
+                        "1.25 x the clock and whose throughput covers the sample rate (see 'kfpga explore'; default: "
+                        "auto)")
     p.add_argument("--stages", type=positive_int, metavar="N",
                    help="with --architecture parallel: the register stages of the filter's loop (default: the "
                         "core's; 'kfpga explore' lists what each gives)")

@@ -156,13 +156,13 @@ def test_rtl_equals_model_with_backpressure(name, variant, architecture, channel
 def test_a_core_refuses_a_variant_its_filter_does_not_have(name):
     """Every core, whatever builds it, refuses with the config's own message: never a KeyError
     from deep inside, never a core half built."""
-    from kfpga.hw.sequencer import SequentialCore
+    from kfpga.hw.folded import FoldedCore
 
     spec = registry.get(name)
     config = FilterConfig(filter=name)
     with pytest.raises(ConfigError) as refused:
         config.require_variant("no-such-variant")
-    makers = [lambda: SequentialCore(config, "no-such-variant")]
+    makers = [lambda: FoldedCore(config, "no-such-variant")]
     if spec.core is not None:
         module, function = spec.core.split(":")
         make_core = getattr(importlib.import_module(module), function)
@@ -172,7 +172,7 @@ def test_a_core_refuses_a_variant_its_filter_does_not_have(name):
             make()
         assert isinstance(got.value, ConfigError) or "no-such-variant" in str(got.value)
     with pytest.raises(ConfigError) as got:
-        SequentialCore(config, "no-such-variant")
+        FoldedCore(config, "no-such-variant")
     assert str(got.value) == str(refused.value)
 
 
