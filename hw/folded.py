@@ -105,6 +105,10 @@ class FoldedCore(Core):
         figures_only(self)  # the twin is built instead of this core
         return FoldedCore(self.config, self.variant, channels=self.channels, program=handshake_twin(self.program))
 
+    #: Samples the core holds at once: it takes one only when no estimate waits (or one is taken in
+    #: that cycle), so an update and an estimate never overlap (the formal stream checks count it).
+    capacity = 1
+
     @property
     def load_cycles(self):
         """Cycles before the handshake that write the sample's digits but the last (the input word
