@@ -30,7 +30,7 @@ from kfpga.hw.core import Core
 from kfpga.hw.microcode import BEGIN, DIGIT, END, FLAGS, HI, LO, OR, OUT, READ_LATENCY, WORD, compile_update, handshake_twin
 from kfpga.hw.storage import m4k_blocks
 
-__all__ = ["FoldedCore", "encode", "make_core", "word_layout"]
+__all__ = ["FoldedCore", "encode", "make_core", "rom_columns", "rom_words", "word_layout"]
 
 
 def word_layout(program):
@@ -41,6 +41,23 @@ def word_layout(program):
     dbits = max(abits, max(counts).bit_length())
     return {"a": abits, "a2": abits, "b": abits, "d": dbits, "acc": 2, "pred": 2, "wr": 2, "cap": 2, "flag": 1,
             "bit16": 1, "ovf": 1, "loop": 2, "wait": 3, "end": 1}
+
+
+def rom_columns(program):
+    """``(varying, constant)``: the bit columns of the encoded words that differ between words
+    (the program memory holds only these) and ``{bit: value}`` of those that do not (constants in
+    logic: a field no step uses, a wait or an address bit no word sets)."""
+    words = encode(program)
+    width = sum(word_layout(program).values())
+    varying = [i for i in range(width) if len({(w >> i) & 1 for w in words}) > 1]
+    constant = {i: (words[0] >> i) & 1 for i in range(width) if i not in varying}
+    return varying, constant
+
+
+def rom_words(program):
+    """The program memory's contents: each word's varying columns (:func:`rom_columns`), packed."""
+    varying, _ = rom_columns(program)
+    return [sum(((w >> i) & 1) << j for j, i in enumerate(varying)) for w in encode(program)]
 
 
 def encode(program):
@@ -132,9 +149,11 @@ class FoldedCore(Core):
 
     @property
     def m4k_blocks(self):
-        """Block memories: two copies of the register file and the program (a dual-port ROM)."""
+        """Block memories: two copies of the register file and the program (a ROM read on two ports,
+        as wide as its varying columns)."""
         p = self.program
-        return 2 * m4k_blocks(p.depth, WORD) + m4k_blocks(len(p.words), sum(word_layout(p).values()))
+        return 2 * m4k_blocks(p.depth, WORD) + m4k_blocks(max(len(p.words), 2), max(len(rom_columns(p)[0]), 1),
+                                                          two_reads=True)
 
     def elaborate(self, platform):
         b = _Build(self, Module())
@@ -177,8 +196,15 @@ class _Build:
 
     def memories(self):
         m, p = self.m, self.p
-        self.rom = Memory(shape=unsigned(sum(self.layout.values())), depth=max(len(p.words), 2), init=encode(p))
+        varying, constant = rom_columns(p)
+        self.rom = Memory(shape=unsigned(max(len(varying), 1)), depth=max(len(p.words), 2), init=rom_words(p))
         m.submodules.program = self.rom
+
+        def unpack(data):  # the whole word again: the memory's columns and the constant ones
+            column = {i: j for j, i in enumerate(varying)}
+            return Cat(*(data[column[i]] if i in column else Const(constant[i], 1)
+                         for i in range(sum(self.layout.values()))))
+        self.unpack = unpack
         self.fetch_port = self.rom.read_port()
         # the program memory's second port reads the word in R once more, for X: the word of the
         # step in X with no pipeline register of its own
@@ -200,7 +226,7 @@ class _Build:
         is three cycles later (``ending``, the wait counter counting it down), and the routine is
         ``finished`` in that cycle. After reset the reset routine runs at once, for channel 0."""
         m, p = self.m, self.p
-        data = self.fetch_port.data
+        data = self.unpack(self.fetch_port.data)
         self.word, offset = {}, 0
         for name, bits in self.layout.items():
             self.word[name] = data[offset:offset + bits]
@@ -247,9 +273,9 @@ class _Build:
             m.d.comb += [port.addr.eq(self.physical(addr)), port.en.eq(1)]
         # what the later stages need of the step: in X its word read again, then a register for A
         m.d.comb += [self.again_port.addr.eq(self.pc), self.again_port.en.eq(1)]
-        again, offset = {}, 0
+        again, offset, data = {}, 0, self.unpack(self.again_port.data)
         for name, bits in self.layout.items():
-            again[name] = self.again_port.data[offset:offset + bits]
+            again[name] = data[offset:offset + bits]
             offset += bits
         fields = {"acc": 2, "cap": 2, "flag": self.layout["flag"], "bit16": 1, "ovf": 1, "wr": 2, "d": self.layout["d"]}
         x = {"valid": Signal(name="x_valid"), **{name: again[name] for name in fields}}

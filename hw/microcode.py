@@ -460,7 +460,11 @@ class _Lowering:
             extra.setdefault(0, []).append(("pred", ONE, ZERO, k(-c)))  # -c unless the bit is 1
         out = self.temp(nr)
         total = q + 1 + nr
-        for d in range(total):
+        # With no addend below digit q the digits under it carry nothing past the cut (their sum
+        # and digit q's bits below it stay under 2**(17 (q + 1)) once scaled by c), so a floor
+        # starts at digit q.
+        first = min(extra, default=q)
+        for d in range(min(first, q), total):
             steps = []
             src = v.at(d)
             if src is not None:
@@ -469,7 +473,7 @@ class _Lowering:
             steps = steps or [(ZERO, ZERO)]
             write = d > q
             for j, step in enumerate(steps):
-                mode = (CLEAR if d == 0 else SHIFT) if j == 0 else KEEP
+                mode = (CLEAR if d == min(first, q) else SHIFT) if j == 0 else KEEP
                 last = j == len(steps) - 1
                 wr, dst = NONE, None
                 if last and write:
@@ -496,10 +500,40 @@ class _Lowering:
             self.compare_negative([(r, 1, 0), (bottom, -1, 0)], n, 1, ovf=True)  # r < min: flagged
             return self.wrap(r, nt, fmt.width)
         kept = self.truncate(r, nt) if nr > nt else r if nr == nt else self.linear([(r, 1, 0)], nt)
-        self.compare_negative([(top, 1, 0), (r, -1, 0)], n, 1, ovf=True)  # r > max
+        if not self.past_power(r, fmt.width - 1, 1, high=True):
+            self.compare_negative([(top, 1, 0), (r, -1, 0)], n, 1, ovf=True)  # r > max
         high = self.select(1, top, kept, nt)
-        self.compare_negative([(r, 1, 0), (bottom, -1, 0)], n, 1, ovf=True)  # r < min
+        if not self.past_power(r, fmt.width - 1, 1, high=False):
+            self.compare_negative([(r, 1, 0), (bottom, -1, 0)], n, 1, ovf=True)  # r < min
         return self.select(1, bottom, high, nt)
+
+    def past_power(self, r, p, flag, *, high):
+        """``flag := r >= 2**p`` (``high``) or ``r < -2**p``, flagged as an overflow, from the digits
+        of ``r`` that hold bit ``p`` and above: with ``F = floor(r / 2**p)`` (read as a floor from
+        digit ``q`` up, :meth:`round_shift`), ``r >= 2**p`` is ``-F < 0`` and ``r < -2**p`` is
+        ``F + 1 < 0``. The full comparison reads every digit of ``r`` and of the bound, twice as many
+        steps. False (nothing emitted) where ``r`` has no digit at ``q``."""
+        if p < 1:
+            return False
+        q, rr = divmod(p - 1, DIGIT)
+        c = 1 << (DIGIT - rr - 1)  # p = 17 q + rr + 1: each digit times 2**(17 - (rr + 1))
+        if q >= r.n:
+            return False
+        sign = -1 if high else 1
+        steps = [(r.at(q), k(sign * c), CLEAR)]
+        if high:
+            # -(v_q c) rounded up, not down, at the shift: then it is -floor(v_q c / 2**17) exactly
+            steps.append((ONE, k(RADIX - 1), KEEP))
+        for d in range(q + 1, r.n):
+            steps.append((r.at(d), k(sign * c), SHIFT))
+            if not high and d == q + 1:
+                steps.append((ONE, ONE, KEEP))  # F + 1: the 1 at the weight of F's first digit
+        if not high and r.n == q + 1:
+            steps.append((ONE, ONE, SHIFT))  # F is digit q's scaled value shifted once
+        for j, (a, b, mode) in enumerate(steps):
+            last = j == len(steps) - 1
+            self.emit(Mac(a, b, mode, cap=SET if last else NONE, flag=flag, ovf=last))
+        return True
 
     def truncate(self, r, nt):
         """The low ``nt`` digits of ``r``, whose value fits them (its top digit signed again)."""

@@ -311,6 +311,20 @@ def _block_memory_bits(module):
     return sum(param(c, "SIZE") * param(c, "WIDTH") for c in module["cells"].values() if c["type"] == MEMORY_CELL)
 
 
+def _block_memory_m4k(module):
+    """M4K blocks of the block memories (each ``kfpga_mem`` black box as Quartus lays out a simple
+    dual-port RAM of its depth and width, :func:`kfpga.hw.storage.m4k_blocks`)."""
+    from kfpga.hw.storage import m4k_blocks
+    from kfpga.hw.timing import MEMORY_CELL
+
+    def param(cell, name):
+        value = cell["parameters"].get(name, 0)
+        return int(value, 2) if isinstance(value, str) else int(value)
+
+    return sum(m4k_blocks(param(c, "SIZE"), param(c, "WIDTH"), two_reads=param(c, "RD_PORTS") > 1)
+               for c in module["cells"].values() if c["type"] == MEMORY_CELL)
+
+
 def _memory_bits(log):
     bits = 0
     for line in log.splitlines():
@@ -383,6 +397,7 @@ def estimate(verilog, top, *, work_dir=None, timing=None):
         "mul18": mul18,
         "mul9": mul9,
         "memory_bits": _memory_bits(log) or _block_memory_bits(synth),
+        "m4k_blocks": _block_memory_m4k(synth),
         "lut_levels": levels,
         "lut_levels_no_carry": no_carry,
         "longest_path_ends_at": where,

@@ -22,13 +22,15 @@ MAX_REGISTER_CHANNELS = 8
 M4K_WIDTHS = {128: 36, 256: 18, 512: 9, 1024: 4, 2048: 2, 4096: 1}
 
 
-def m4k_blocks(depth, width):
+def m4k_blocks(depth, width, *, two_reads=False):
     """M4K blocks of a ``depth`` x ``width`` simple dual-port RAM: blocks side by side, each as
-    wide as the depth allows, and more rows of them past 4,096 words."""
+    wide as the depth allows, and more rows of them past 4,096 words. ``two_reads``: a memory read
+    on two ports (true dual-port mode, whose widest word is 18 bits at 256 deep: no 128 x 36)."""
     rows = math.ceil(depth / 4096)
     per_row = min(depth, 4096)
-    block_depth = next(d for d in sorted(M4K_WIDTHS) if d >= per_row)
-    return rows * math.ceil(width / M4K_WIDTHS[block_depth])
+    widths = {d: w for d, w in M4K_WIDTHS.items() if not (two_reads and w > 18)}
+    block_depth = next(d for d in sorted(widths) if d >= per_row)
+    return rows * math.ceil(width / widths[block_depth])
 
 
 class StateMemory(Elaboratable):

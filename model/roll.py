@@ -714,7 +714,7 @@ def predict_fixed(z, config, variant="sqrt", *, check=False):
 def word_config(base, variant, register_frac, operand_bits):
     """``base`` with the covariance path of ``variant`` at ``register_frac`` fraction bits in its
     registers and ``operand_bits``-bit multiplier operands (each keeping its integer bits); or the
-    reason there is none (an intermediate past the model's 62 bits)."""
+    reason the config refuses those formats (a constant they cannot hold)."""
     from kfpga.core.config import ConfigError, FilterConfig
 
     registers, operands = COVARIANCE_POINTS[variant]
@@ -724,7 +724,7 @@ def word_config(base, variant, register_frac, operand_bits):
     for name in operands:
         formats[name] = QFormat(base.formats[name].int_bits, max(0, operand_bits - base.formats[name].int_bits))
     try:
-        return FilterConfig(filter="roll", params=base.params, formats=formats, check_ranges=False, max_word=62)
+        return FilterConfig(filter="roll", params=base.params, formats=formats, check_ranges=False)
     except ConfigError as exc:
         return str(exc)
 

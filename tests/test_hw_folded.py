@@ -5,6 +5,7 @@ narrow word budgets that give every cast point a format), gives the model's inte
 microcode's own cycle-by-cycle semantics and in the RTL."""
 
 import dataclasses
+import random
 
 import numpy as np
 import pytest
@@ -103,12 +104,12 @@ def test_the_core_runs_any_update_bit_exact(name, variant, seed):
     spec = registry.get(name)
     for trial in range(2):
         config = random_config(spec, variant, rng)
-        n = 30 if name == "roll" else 60
+        core = FoldedCore(config, variant, channels=2)
+        n = max(8, min(60, 60_000 // core.cycles_per_update))  # Amaranth's simulator: some 4,000 cycles a second
         y = stimulus(config, rng, n)
         channels = rng.integers(0, 2, n)
         words = _words(config, y, channels)
-        out = run_stream(FoldedCore(config, variant, channels=2), words, seed=seed + trial, p_idle=0.3,
-                         p_ready=0.5, extra_cycles=40)
+        out = run_stream(core, words, seed=seed + trial, p_idle=0.3, p_ready=0.5, extra_cycles=40)
         board = Scoreboard(config, variant)
         for word in words:
             board.add_input(word["channel"], {k: v for k, v in word.items() if k != "channel"})
@@ -178,3 +179,75 @@ def test_a_sample_of_two_digits_is_written_before_its_word_is_taken(seed):
     expect = FixedModel(config, variant="online").run(y)
     for field in config.output_names:
         np.testing.assert_array_equal([int(getattr(o, field)) for o in out], expect.outputs[field], err_msg=field)
+
+
+def _steps_run(code, regs):
+    """The steps of ``code`` one after another (no pipeline): the accumulator, the flags and the
+    register file as a dict of symbolic addresses (a constant word ``("k", v)`` holds ``v``)."""
+    from kfpga.hw.microcode import CLEAR, HI, KEEP, LO, RADIX, SET
+
+    acc, flags = 0, {}
+    for mac in code:
+        def read(addr):
+            return addr[1] if addr[0] == "k" else regs[addr]
+        a = mac.a2 if mac.pred is not None and flags.get(mac.pred - 1) else mac.a
+        base = 0 if mac.acc == CLEAR else acc if mac.acc == KEEP else acc >> DIGIT
+        acc = base + read(a) * read(mac.b)
+        if mac.cap:
+            bit = (acc >> 16) & 1 if mac.bit16 else int(acc < 0)
+            flags[mac.flag] = bit if mac.cap == SET else flags.get(mac.flag, 0) | bit
+        if mac.wr == LO:
+            regs[mac.d] = acc & (RADIX - 1)
+        elif mac.wr == HI:
+            regs[mac.d] = acc
+    return flags
+
+
+def _lowered_value(value, n):
+    from kfpga.hw.microcode import _Lowering, _Val
+
+    low = _Lowering([], [], [], 1)
+    v = _Val(tuple(("t", "v", j) for j in range(n)))
+    return low, v, dict(zip(v.addrs, to_digits(value, n), strict=True))
+
+
+EDGES = [(p, n) for n in (1, 2, 3, 4) for p in (1, 5, 16, 17, 18, 33, 34, 35, 51, 52) if p < 17 * n + 1]
+
+
+@pytest.mark.parametrize(("p", "n"), EDGES)
+def test_a_bound_check_from_the_top_digits_is_exact_at_its_edges(p, n, seed):
+    """Saturation asks ``r >= 2**p`` and ``r < -2**p`` from the digits that hold bit ``p`` and
+    above (``_Lowering.past_power``): at the bounds and one past them, and at random values of
+    ``n`` digits, the flag is the comparison's, worked out here on Python integers."""
+    rng = random.Random(seed)
+    lo, hi = -(1 << (17 * n)), (1 << (17 * n)) - 1
+    edges = [v for b in (1 << p, -(1 << p)) for v in (b - 2, b - 1, b, b + 1) if lo <= v <= hi]
+    values = edges + [lo, hi, 0, -1] + [rng.randint(lo, hi) for _ in range(60)]
+    for value in values:
+        for high in (True, False):
+            low, v, regs = _lowered_value(value, n)
+            if not low.past_power(v, p, 1, high=high):
+                assert p - 1 >= 17 * n  # only a value with no digit at bit p is left to the full check
+                continue
+            flags = _steps_run(low.code, regs)
+            assert flags[1] == int(value >= 1 << p if high else value < -(1 << p)), (value, p, n, high)
+            assert all(m.ovf for m in low.code if m.cap) and low.code[-1].cap
+
+
+@pytest.mark.parametrize(("s", "n"), [(1, 1), (7, 2), (17, 2), (18, 2), (34, 3), (35, 3), (40, 4)])
+def test_a_floor_from_digit_q_up_is_the_floor(s, n, seed):
+    """A requantisation toward minus infinity reads no digit below the one that holds bit ``s``
+    (``_Lowering.round_shift``): its result is ``value >> s`` at the edges of each digit and at
+    random values."""
+    from kfpga.core.fixed import Rounding
+
+    rng = random.Random(seed)
+    lo, hi = -(1 << (17 * n)), (1 << (17 * n)) - 1
+    values = [lo, hi, 0, -1, 1 << s, (1 << s) - 1, -(1 << s), -(1 << s) - 1] + [rng.randint(lo, hi) for _ in range(60)]
+    nr = digits_for(lo >> s, hi >> s)
+    for value in values:
+        low, v, regs = _lowered_value(value, n)
+        out = low.round_shift(v, s, Rounding.FLOOR, nr)
+        assert all(m.a[0] == "k" or m.a in v.addrs[(s - 1) // 17:] or m.a[1] != "v" for m in low.code)
+        _steps_run(low.code, regs)
+        assert from_digits([regs[a] for a in out.addrs]) == value >> s, (value, s, n)

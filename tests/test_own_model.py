@@ -166,7 +166,7 @@ def test_generate_chooses_a_design_that_meets_the_clock(at_100_hz, capsys, tmp_p
     assert main(["generate", "--config", str(at_100_hz), "--out", "slow", "--architecture", "parallel", "--stages", "1",
                  "--no-lint", "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "below the 50 MHz clock" in err[0] and "--stages" in err[0]
+    assert len(err) == 1 and "below the 50 MHz clock" in err[0] and "meets it (--architecture folded)" in err[0]
     assert not (tmp_path / "slow").exists()
     # ... unless forced, and the manifest records it
     assert main(["generate", "--config", str(at_100_hz), "--out", "forced", "--architecture", "parallel", "--stages",
@@ -202,3 +202,26 @@ def test_a_rate_the_adc_cannot_reach_and_a_period_that_disagrees_are_refused(tmp
     other.write_text("[model]\nT = 0.01\n[board]\nsample_rate_hz = 50\n")
     assert main(["compare", "--config", str(other), "--samples", "500"]) == 2
     assert "T = 0.01 s is a rate of 100 Hz, but [board] sample_rate_hz = 50" in capsys.readouterr().err
+
+
+def test_a_design_past_the_device_is_never_chosen_nor_written(at_100_hz, capsys, tmp_path, monkeypatch):
+    """With the device's M4K blocks cut to 3 (the folded core of this tracker takes more), explore
+    marks the folded core 'no (device: ...)', auto takes a parallel loop, and a forced folded core
+    is refused in one line, even with --ignore-timing: nothing is written."""
+    from kfpga.hw.resources import EP2C20
+
+    monkeypatch.setitem(EP2C20, "m4k_blocks", 3)
+    assert main(["explore", "--config", str(at_100_hz), "--json", "--quiet"]) == 0
+    found = json.loads(capsys.readouterr().out)
+    folded = next(c for c in found if c["architecture"] == "folded")
+    assert folded["m4k_blocks"] > 3 and not folded["fits"] and not folded["meets"] and not folded["chosen"]
+    assert next(c for c in found if c["chosen"])["architecture"] == "parallel"
+    assert main(["explore", "--config", str(at_100_hz), "--quiet"]) == 0
+    assert f"no (device: {folded['m4k_blocks']} of 3 M4K blocks)" in capsys.readouterr().out
+    for extra in ([], ["--ignore-timing"]):
+        assert main(["generate", "--config", str(at_100_hz), "--out", "big", "--architecture", "folded", "--no-lint",
+                     "--quiet", *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"kfpga generate: error: the folded design does not fit the EP2C20: it takes "
+                       f"{folded['m4k_blocks']} of 3 M4K blocks"]
+        assert not (tmp_path / "big").exists()

@@ -410,6 +410,10 @@ def architecture(args, config, channels):
     found = explore(config, args.variant, channels, quiet=getattr(args, "quiet", False))
     args.candidates = found
     best = choose(found)
+    if best is None and not any(c.fits for c in found):
+        smallest = min(found, key=lambda c: (c.m4k_blocks, c.logic_cells))
+        raise UsageError(f"no design of the {args.variant} variant fits the EP2C20: the smallest, {smallest.label}, "
+                         f"takes {smallest.over_device}; see 'kfpga explore'")
     if best is None:
         fastest = max(found, key=lambda c: c.fmax_mhz)
         raise UsageError(f"no design of the {args.variant} variant meets the {config.board.clock_hz / 1e6:g} MHz clock "

@@ -53,12 +53,14 @@ def run(args):
           f"{'updates/s':>12}  meets")
     for c in found:
         misses = [what for what, ok in (("margin", c.meets_clock or not c.within_clock), ("clock", c.within_clock),
-                                         ("rate", c.meets_rate)) if not ok]
+                                         ("rate", c.meets_rate), (f"device: {c.over_device}", c.fits)) if not ok]
         mark = "  <- chosen" if c.chosen else ""
         print(f"  {c.label:<24}{c.logic_cells:>12}{c.mul18:>7}{c.memory_bits:>10}{c.fmax_mhz:>10.1f}"
               f"{c.cycles_per_update:>8}{c.updates_per_s:>12.4g}  {'yes' if not misses else 'no (' + ', '.join(misses) + ')'}"
               f"{mark}")
-    if best is None:
+    if best is None and not any(c.fits for c in found):
+        print("  no design fits the EP2C20: generate refuses them")
+    elif best is None:
         print("  no design meets the clock and the rate: generate refuses them unless --ignore-timing")
     elif not best.meets:
         print(f"  no design has the {FMAX_MARGIN:g} x margin: the chosen one meets the clock itself")

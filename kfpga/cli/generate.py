@@ -151,7 +151,8 @@ def _check_pins(config, field, pins, ratio, sensors=1):
 
 def _timing(args, config, architecture):
     """The chosen design's estimate against the clock: refused when it misses, unless
-    ``--ignore-timing`` (then a warning, and the manifest records it)."""
+    ``--ignore-timing`` (then a warning, and the manifest records it); refused always when it does
+    not fit the device."""
     from kfpga.flows.explore import choose
     from kfpga.hw.generate import figures_only
 
@@ -159,6 +160,8 @@ def _timing(args, config, architecture):
     core = figures_only(config.spec.make_core(config, args.variant, channels=args.channels, architecture=architecture,
                                               **({} if args.stages is None else {"stages": args.stages})))
     design = next(c for c in every if c.architecture == architecture and c.stages == getattr(core, "stages", None))
+    if not design.fits:
+        raise UsageError(f"the {design.label} design does not fit the EP2C20: it takes {design.over_device}")
     clock = config.board.clock_hz / 1e6
     record = {"fmax_mhz_estimate": design.fmax_mhz, "clock_mhz": clock, "meets_clock": design.fmax_mhz >= clock,
               "worst_path": design.worst_path, "logic_cells": design.logic_cells}

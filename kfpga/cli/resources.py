@@ -56,7 +56,10 @@ def _synthesise(args, config):
 
 
 def _goals(config, args, results):
+    from kfpga.hw.resources import EP2C20
+
     goals = config.spec.goals(config, args.variant, args.channels)
+    goals.setdefault("m4k_blocks", EP2C20["m4k_blocks"])  # the device's: a design past it cannot be fitted
     core = results["core"]
     met = {k: core[k] <= v for k, v in goals.items()}
     if "worst_path_ns" in goals:  # the timing goal holds for the whole design too
@@ -106,7 +109,7 @@ def _print(args, config, results, goals, met, note):
     rows = [("logic cells (LE estimate)", "logic_cells", EP2C20["logic_elements"]),
             ("LUT4s (no carry chains)", "luts", None), ("flip-flops", "ffs", None),
             ("18x18 multipliers", "mul18", EP2C20["mul18"]), ("9x9 multipliers", "mul9", 2 * EP2C20["mul18"]),
-            ("memory bits", "memory_bits", EP2C20["memory_bits"]),
+            ("memory bits", "memory_bits", EP2C20["memory_bits"]), ("M4K blocks", "m4k_blocks", EP2C20["m4k_blocks"]),
             ("LUT levels, carry chains as 1", "lut_levels", None), ("LUT levels, no carry chains", "lut_levels_no_carry", None),
             ("worst path (ns, -8 estimate)", "worst_path_ns", None), ("Fmax estimate (MHz)", "fmax_mhz_estimate", None)]
     if args.ecp5:

@@ -11,7 +11,8 @@ as the core takes its samples).
 The choice (``--architecture auto``): the cheapest candidate (logic cells, then multipliers,
 then M4K bits) whose estimated Fmax is at least :data:`FMAX_MARGIN` times the clock and whose
 throughput covers the need; when none has that margin, the cheapest that meets the clock itself
-(and the caller warns); when none meets the clock, none. The architecture changes no integer:
+(and the caller warns); when none meets the clock, none. A design past the EP2C20's logic
+elements, multipliers or M4K blocks is never chosen. The architecture changes no integer:
 every candidate computes the model's.
 
 Estimates are cached by the Verilog's content under the user's cache folder, so a second run of
@@ -54,6 +55,21 @@ class Candidate:
     worst_path: str = ""
     chosen: bool = False
     clock_mhz: float = 50.0
+    m4k_blocks: int = 0
+
+    @property
+    def over_device(self):
+        """What passes the EP2C20's capacity, as ``"55 of 52 M4K blocks"`` (empty: it fits)."""
+        from kfpga.hw.resources import EP2C20
+
+        over = [f"{have} of {cap} {what}" for have, cap, what in (
+            (self.logic_cells, EP2C20["logic_elements"], "logic elements"), (self.mul18, EP2C20["mul18"], "multipliers"),
+            (self.m4k_blocks, EP2C20["m4k_blocks"], "M4K blocks")) if have > cap]
+        return ", ".join(over)
+
+    @property
+    def fits(self):
+        return not self.over_device
 
     @property
     def within_clock(self):
@@ -62,19 +78,27 @@ class Candidate:
 
     @property
     def meets(self):
-        return self.meets_clock and self.meets_rate
+        return self.meets_clock and self.meets_rate and self.fits
 
     @property
     def label(self):
         return self.architecture + ("" if self.stages is None else f", {self.stages} stage{'s' if self.stages > 1 else ''}")
 
     def as_dict(self):
-        return {**asdict(self), "meets": self.meets, "within_clock": self.within_clock, "label": self.label}
+        return {**asdict(self), "meets": self.meets, "within_clock": self.within_clock, "fits": self.fits,
+                "label": self.label}
 
 
 def _cache_dir():
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(base) / "kfpga" / "estimates"
+
+
+def _estimator_source():
+    """The estimator's own source: a change to how figures are counted makes every cached one stale."""
+    from kfpga.hw import resources, timing
+
+    return b"".join(Path(module.__file__).read_bytes() for module in (resources, timing))
 
 
 def _estimate(core, name):
@@ -83,7 +107,7 @@ def _estimate(core, name):
     from kfpga.hw.resources import estimate
 
     text = to_verilog(core, name)
-    digest = hashlib.sha256(text.encode()).hexdigest()[:24]
+    digest = hashlib.sha256(text.encode() + _estimator_source()).hexdigest()[:24]
     cache = _cache_dir() / f"{digest}.json"
     try:
         return json.loads(cache.read_text())
@@ -93,7 +117,8 @@ def _estimate(core, name):
         path = Path(tmp) / f"{name}.v"
         path.write_text(text)
         result = estimate(path, name)
-    keep = {k: result[k] for k in ("logic_cells", "mul18", "memory_bits", "fmax_mhz_estimate", "worst_path_ns")}
+    keep = {k: result[k] for k in ("logic_cells", "mul18", "memory_bits", "m4k_blocks", "fmax_mhz_estimate",
+                                   "worst_path_ns")}
     path = result.get("worst_path") or {}
     keep["worst_path"] = f"{path.get('start', '?')} -> {path.get('end', '?')}" if path else ""
     try:
@@ -144,18 +169,18 @@ def candidates(config, variant, *, channels=1, clock_hz=50e6, need_hz, progress=
         out.append(Candidate(architecture, stages, channels, est["logic_cells"], est["mul18"], est["memory_bits"],
                              est["fmax_mhz_estimate"], core.cycles_per_update, updates,
                              est["fmax_mhz_estimate"] >= FMAX_MARGIN * clock_hz / 1e6, updates >= need_hz,
-                             est["worst_path"], clock_mhz=clock_hz / 1e6))
+                             est["worst_path"], clock_mhz=clock_hz / 1e6, m4k_blocks=est["m4k_blocks"]))
     return out
 
 
 def choose(found):
-    """The cheapest candidate that meets the clock with the margin and the rate; else the cheapest
-    that meets the clock itself and the rate; marked ``chosen``. ``None`` when no candidate meets
-    the clock and the rate."""
+    """The cheapest candidate that fits the device and meets the clock with the margin and the
+    rate; else the cheapest that fits and meets the clock itself and the rate; marked ``chosen``.
+    ``None`` when no candidate that fits meets the clock and the rate."""
     def cost(c):
         return c.logic_cells, c.mul18, c.memory_bits
 
-    ok = [c for c in found if c.meets] or [c for c in found if c.within_clock and c.meets_rate]
+    ok = [c for c in found if c.meets] or [c for c in found if c.within_clock and c.meets_rate and c.fits]
     if not ok:
         return None
     best = min(ok, key=cost)

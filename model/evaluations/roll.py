@@ -175,7 +175,7 @@ def roll_table(result):
         line = f"{form:<7} {frac:>3} {width if width else '-':>6} "
         for b in _word_bits(result):
             c = cells.get(b, {})
-            line += (f"{c['not_positive_definite']:>5} {c['rmse_deg']:>9.4g}" if "rmse_deg" in c else f"{'(> 62 bits)':>15}")
+            line += (f"{c['not_positive_definite']:>5} {c['rmse_deg']:>9.4g}" if "rmse_deg" in c else f"{'(refused)':>15}")
         lines.append(line)
     lines += ["", _word_finding(result), "table 1 has 32 of the paper's 480 samples (it says 40, prints 32); the "
               "synthetic series stands in for the rest, with its noise known."]
