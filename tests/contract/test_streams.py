@@ -24,7 +24,7 @@ import random
 import numpy as np
 import pytest
 from amaranth.lib import data
-from test_contract import HW_CASES, codes
+from test_contract import HW_CASES, codes, samples_for
 
 from kfpga.core.config import FilterConfig
 from kfpga.hw.alphabeta import TrackerCore
@@ -82,10 +82,11 @@ def test_a_slow_receiver_does_not_stall_the_core(name, variant, architecture, ch
 def test_a_receiver_ready_only_after_valid_gets_every_estimate(name, variant, architecture, seed):
     config = FilterConfig(filter=name)
     rng = np.random.default_rng(seed)
-    y = codes(rng, 60) if len(config.inputs) == 1 else {k: codes(rng, 60) for k in config.inputs}
+    n = samples_for(config, variant, 60, 3, architecture, pysim=True)
+    y = codes(rng, n) if len(config.inputs) == 1 else {k: codes(rng, n) for k in config.inputs}
     report = run_core(config, variant, y, seed=seed, channels=3, p_idle=0.2, p_ready=AFTER_VALID,
                       options={"architecture": architecture})
-    assert report["compared"] == 60 and report["extra"] == 0
+    assert report["compared"] == n and report["extra"] == 0
 
 
 # -- the stream units --------------------------------------------------------------------------------------
