@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 BUILD  := build
 
-.PHONY: demo test models docs bench lint venv clean formal mutate mutate-source regress
+.PHONY: demo test test-long models docs bench lint venv clean formal mutate mutate-source regress
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -17,7 +17,12 @@ venv: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/lint-imports
-	$(BIN)/python -m pytest -n auto --dist loadgroup -m "not models"
+	$(BIN)/python -m pytest -n auto --dist loadgroup -m "not models and not long"
+
+# the long tier: the slowest runs (the roll predictor's 12,000-cycle updates on the folded core,
+# Icarus on the paper's roll series, a planted rounding on the folded core, an equivalence proof)
+test-long: $(STAMP)
+	$(BIN)/python -m pytest -n auto --dist loadgroup -m "long and not models"
 
 # the example models of examples/models, default and proposed formats, both variants: RMSE within
 # 1 % of float's on unseen seeds and co-simulation on both simulators (see docs/own-model.md)

@@ -172,6 +172,7 @@ def test_controller_ready_does_not_pace_the_conversions(simulator, six, seed):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 @pytest.mark.parametrize("variant", ["steady", "full"])
 def test_system_bit_exact(simulator, variant, seed):
     """100,000 estimates per variant on Verilator, 5,000 on Icarus, through divider + controller

@@ -9,7 +9,7 @@ import random
 
 import numpy as np
 import pytest
-from contract.test_contract import random_config, stimulus
+from contract.test_contract import long_tier, random_config, slow_update, stimulus
 
 from kfpga.core import registry
 from kfpga.core.config import FilterConfig
@@ -96,7 +96,7 @@ def test_a_schedule_that_breaks_the_pipeline_gives_other_integers(seed):
         assert [o["x1"] for o in bad] != list(expect)
 
 
-@pytest.mark.parametrize(("name", "variant"), HW_CASES)
+@pytest.mark.parametrize(("name", "variant"), long_tier(HW_CASES, slow_update))
 def test_the_core_runs_any_update_bit_exact(name, variant, seed):
     """Each filter's update on the folded core in Amaranth's simulator, random configs, two
     channels, random valid/ready: one estimate per sample, the model's integers."""

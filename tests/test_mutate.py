@@ -80,6 +80,7 @@ def _register_cell(il_text, wire):
     return match.group(1)
 
 
+@pytest.mark.long
 def test_a_change_only_a_channel_number_shows_is_equivalent_in_a_one_channel_core(tmp_path):
     """The steady core's input register, bit 15 inverted when its bit 0 is set: bit 0 is the
     channel field, always 0 in a one-channel core, so equiv_induct proves it equivalent with the

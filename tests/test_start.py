@@ -137,7 +137,8 @@ def test_which_cores_run_it(key):
 @pytest.mark.parametrize("simulator", SIMULATORS)
 @pytest.mark.parametrize(("key", "variant", "architecture", "channels"),
                          [("kalman", "full", "folded", 2), ("kalman2", "steady", "folded", 2),
-                          ("roll", "sqrt", "folded", 2), ("kalman2", "steady", "parallel", 2),
+                          pytest.param("roll", "sqrt", "folded", 2, marks=pytest.mark.long),
+                          ("kalman2", "steady", "parallel", 2),
                           ("alphabeta", "steady", "parallel", 3), ("alphabeta", "steady", "parallel", 10)])
 def test_the_start_is_bit_exact_on_the_core(key, variant, architecture, channels, simulator, seed):
     """The core's generated Verilog against the model, several channels (each starts by itself;

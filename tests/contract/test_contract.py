@@ -57,6 +57,17 @@ HW_CASES = [pytest.param(spec.name, variant, architecture, id=f"{spec.name}-{var
             for architecture in spec.architectures(variant, spec.params())]
 
 
+def long_tier(cases, pick):
+    """``cases`` with those ``pick(*values)`` chooses marked for the long tier (``make test-long``)."""
+    return [pytest.param(*c.values, id=c.id, marks=pytest.mark.long) if pick(*c.values) else c for c in cases]
+
+
+#: The roll predictor's square-root update on the folded core takes some 12,000 cycles: its
+#: Amaranth-simulator runs of many updates are in the long tier.
+def slow_update(name, variant, architecture="folded", *_):
+    return (name, variant, architecture) == ("roll", "sqrt", "folded")
+
+
 def random_config(spec, variant, rng):
     """Random parameters, and formats near (and sometimes well below) their defaults; valid. Half of
     the configs have a narrow word budget, so that most cast points get formats of their own."""
@@ -182,7 +193,7 @@ def test_a_core_refuses_a_variant_its_filter_does_not_have(name):
     assert str(got.value) == str(refused.value)
 
 
-@pytest.mark.parametrize(("name", "variant", "architecture"), HW_CASES)
+@pytest.mark.parametrize(("name", "variant", "architecture"), long_tier(HW_CASES, slow_update))
 def test_declared_latency_and_cycles_per_update_are_measured(name, variant, architecture):
     config = FilterConfig(filter=name)
     dut = config.spec.make_core(config, variant, architecture=architecture)
@@ -351,7 +362,8 @@ def test_rtl_rounds_every_cast_point_as_the_model(name, variant, architecture, s
     assert report["compared"] == n
 
 
-@pytest.mark.parametrize(("name", "variant", "architecture"), CAST_CASES)
+@pytest.mark.parametrize(("name", "variant", "architecture"),
+                         long_tier(CAST_CASES, lambda name, variant, architecture: architecture == "folded"))
 def test_a_wrong_rounding_of_one_product_is_caught(name, variant, architecture, seed):
     """A core built with one cast point rounded by another rule than the model's: the scoreboard
     finds it (the contract can fail on a per-operation format)."""
