@@ -299,30 +299,29 @@ def _logic_cells(carry):
     return luts + alu_bits + ff_bits - packed
 
 
-def _block_memory_bits(module):
-    """Bits of the block memories (``kfpga_mem`` black boxes: a memory Yosys kept as one cell,
-    which ``stat`` does not count as memory bits)."""
+def _block_memories(module):
+    """``(depth, width, read ports)`` of each block memory (a ``kfpga_mem`` black box: a memory
+    Yosys kept as one cell, which ``stat`` does not count as memory bits)."""
     from kfpga.hw.timing import MEMORY_CELL
 
     def param(cell, name):
         value = cell["parameters"].get(name, 0)
         return int(value, 2) if isinstance(value, str) else int(value)
 
-    return sum(param(c, "SIZE") * param(c, "WIDTH") for c in module["cells"].values() if c["type"] == MEMORY_CELL)
+    return [(param(c, "SIZE"), param(c, "WIDTH"), param(c, "RD_PORTS"))
+            for c in module["cells"].values() if c["type"] == MEMORY_CELL]
+
+
+def _block_memory_bits(module):
+    return sum(depth * width for depth, width, _ in _block_memories(module))
 
 
 def _block_memory_m4k(module):
-    """M4K blocks of the block memories (each ``kfpga_mem`` black box as Quartus lays out a simple
-    dual-port RAM of its depth and width, :func:`kfpga.hw.storage.m4k_blocks`)."""
+    """M4K blocks of the block memories, each as Quartus lays out a RAM of its depth and width
+    (:func:`kfpga.hw.storage.m4k_blocks`)."""
     from kfpga.hw.storage import m4k_blocks
-    from kfpga.hw.timing import MEMORY_CELL
 
-    def param(cell, name):
-        value = cell["parameters"].get(name, 0)
-        return int(value, 2) if isinstance(value, str) else int(value)
-
-    return sum(m4k_blocks(param(c, "SIZE"), param(c, "WIDTH"), two_reads=param(c, "RD_PORTS") > 1)
-               for c in module["cells"].values() if c["type"] == MEMORY_CELL)
+    return sum(m4k_blocks(depth, width, two_reads=reads > 1) for depth, width, reads in _block_memories(module))
 
 
 def _memory_bits(log):
