@@ -73,7 +73,7 @@ class Core(wiring.Component):
     #: Channel states this core can hold (a core that keeps them in block memory holds more).
     max_channels = MAX_REGISTER_CHANNELS
 
-    def __init__(self, config, variant, channels, *, index_bits=None):
+    def __init__(self, config, variant, channels, *, index_bits=None, missing=False, members=None):
         check_channels(channels, self.max_channels)
         if index_bits is not None and index_bits < channel_bits(channels):
             raise ValueError(f"index_bits = {index_bits} cannot number {channels} channels")
@@ -85,9 +85,10 @@ class Core(wiring.Component):
         self.reset_state = config.reset_state(variant)
         self.state_points = dict(config.spec.variants[variant].state_for(config.params))
         super().__init__({
-            "i": In(stream.Signature(input_layout(config, channels, index_bits))),
+            "i": In(stream.Signature(input_layout(config, channels, index_bits, missing=missing))),
             "o": Out(stream.Signature(output_layout(config, channels, index_bits))),
             "overflow": Out(1),
+            **(members or {}),
         })
 
     @cached_property

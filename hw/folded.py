@@ -24,13 +24,36 @@ from __future__ import annotations
 
 from amaranth import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib.memory import Memory
+from amaranth.lib.wiring import In, Out
 
 from kfpga.core.board import MAX_SENSORS
 from kfpga.hw.core import Core
 from kfpga.hw.microcode import BEGIN, DIGIT, END, FLAGS, HI, LO, OR, OUT, READ_LATENCY, WORD, compile_update, handshake_twin
-from kfpga.hw.storage import m4k_blocks
+from kfpga.hw.storage import check_channels, m4k_blocks
 
-__all__ = ["FoldedCore", "encode", "make_core", "rom_columns", "rom_words", "word_layout"]
+__all__ = ["FoldedCore", "BUSES", "encode", "make_core", "rom_columns", "rom_words", "word_layout", "bus_members"]
+
+#: The buses a programmable core can have (``hw/regmap.py`` for its registers).
+BUSES = ("avalon", "axi4lite")
+
+
+def bus_members(bus, address_bits):
+    """The ports of ``bus`` (``None``: none), word addresses of ``address_bits`` bits: Avalon-MM
+    ``avs_*`` (word addresses, read data the cycle after a read, ``avs_readdatavalid``) or
+    AXI4-Lite ``s_axil_*`` (byte addresses)."""
+    if bus is None:
+        return {}
+    if bus == "avalon":
+        return {"avs_address": In(address_bits), "avs_write": In(1), "avs_writedata": In(32), "avs_read": In(1),
+                "avs_readdata": Out(32), "avs_readdatavalid": Out(1), "avs_waitrequest": Out(1)}
+    if bus == "axi4lite":
+        a = address_bits + 2
+        return {"s_axil_awaddr": In(a), "s_axil_awprot": In(3), "s_axil_awvalid": In(1), "s_axil_awready": Out(1),
+                "s_axil_wdata": In(32), "s_axil_wstrb": In(4), "s_axil_wvalid": In(1), "s_axil_wready": Out(1),
+                "s_axil_bresp": Out(2), "s_axil_bvalid": Out(1), "s_axil_bready": In(1),
+                "s_axil_araddr": In(a), "s_axil_arprot": In(3), "s_axil_arvalid": In(1), "s_axil_arready": Out(1),
+                "s_axil_rdata": Out(32), "s_axil_rresp": Out(2), "s_axil_rvalid": Out(1), "s_axil_rready": In(1)}
+    raise ValueError(f"bus must be one of {', '.join(BUSES)}, not {bus!r}")
 
 
 def word_layout(program):
@@ -105,14 +128,37 @@ class FoldedCore(Core):
         Estimates, one per sample.
     overflow : Out(1)
         Sticky: some write saturated (or wrapped) since reset.
+    missing:
+        With ``i.payload.missing``: a sample with it set has no measurement, and the update only
+        predicts (the variant's ``predict``, its codes not read).
+    bus:
+        ``"avalon"`` or ``"axi4lite"``: a register slave (``hw/regmap.py``) through which the
+        constants and reset values are written at run time (taking effect between updates), the
+        filter reset, and its counters read; ``None``: none, every constant built in.
     """
 
     max_channels = MAX_SENSORS
 
-    def __init__(self, config, variant, *, channels=1, program=None):
-        super().__init__(config, variant, channels)
-        self.program = program or compile_update(config, variant, channels=channels,
-                                                 channel_bits=len(self.i.payload.channel))
+    def __init__(self, config, variant, *, channels=1, program=None, missing=False, bus=None):
+        from kfpga.hw.layouts import channel_bits
+
+        check_channels(channels, self.max_channels)  # the base class's checks, before the compiler runs
+        config.require_hardware(variant)
+        if bus is not None and bus not in BUSES:
+            raise ValueError(f"bus must be one of {', '.join(BUSES)}, not {bus!r}")
+        self.missing, self.bus = missing, bus
+        program = program or compile_update(config, variant, channels=channels, channel_bits=channel_bits(channels),
+                                            predict=missing, programmable=bus is not None)
+        self.program = program
+        self.regs = None
+        members = {}
+        if bus is not None:
+            from kfpga.hw.regmap import register_map
+
+            self.regs = register_map(program, config, variant)
+            self.bus_address_bits = max(5, max(r.index for r in self.regs).bit_length())
+            members = bus_members(bus, self.bus_address_bits)
+        super().__init__(config, variant, channels, missing=missing, members=members)
 
     def formal_twin(self):
         """The core on a short copy of its program (:func:`kfpga.hw.microcode.handshake_twin`): the
@@ -120,7 +166,8 @@ class FoldedCore(Core):
         from kfpga.hw.generate import figures_only
 
         figures_only(self)  # the twin is built instead of this core
-        return FoldedCore(self.config, self.variant, channels=self.channels, program=handshake_twin(self.program))
+        return FoldedCore(self.config, self.variant, channels=self.channels, program=handshake_twin(self.program),
+                          missing=False, bus=None)
 
     #: Samples the core holds at once: it takes one only when no estimate waits (or one is taken in
     #: that cycle), so an update and an estimate never overlap (the formal stream checks count it).
@@ -164,6 +211,8 @@ class FoldedCore(Core):
         b.accumulate()
         b.write()
         b.schedule()
+        if self.bus is not None:
+            b.registers()
         self.parts = b  # the signals of the last elaboration, for a bench that looks inside
         return b.m
 
@@ -338,25 +387,51 @@ class _Build:
     def schedule(self):
         """Idle (a sample's digits written, one a cycle, straight from the input word, which is
         taken with the last) or running a routine: the reset routine once for each channel after
-        reset, then the update's for each sample."""
+        reset, then the update's for each sample (the predict routine's for a sample with no
+        measurement); with a bus, the commit routine and the reset routine between two updates."""
         m, core, p = self.m, self.core, self.p
         self.sample_write, self.sample_addr, self.sample_data = self.sample_port()
-        m.d.comb += [self.wr_addr.eq(Mux(self.sample_write, self.sample_addr, self.step_addr)),
-                     self.wr_data.eq(Mux(self.sample_write, self.sample_data, self.digit)),
-                     self.wr_en.eq(self.sample_write | self.step_write)]
+        bus = core.bus is not None
+        # the bus's write of a setting's digit: in a cycle the sample and the steps leave free
+        self.bus_write = Signal(name="bus_write")
+        self.hold_full = Signal(name="hold_full")
+        self.hold_addr = Signal(self.abits, name="hold_addr", reset_less=True)
+        self.hold_data = Signal(WORD, name="hold_data", reset_less=True)
+        m.d.comb += self.bus_write.eq(self.hold_full & ~self.sample_write & ~self.step_write)
+        m.d.comb += [self.wr_addr.eq(Mux(self.sample_write, self.sample_addr,
+                                         Mux(self.step_write, self.step_addr, self.hold_addr) if bus else self.step_addr)),
+                     self.wr_data.eq(Mux(self.sample_write, self.sample_data,
+                                         Mux(self.step_write, self.digit, self.hold_data) if bus else self.digit)),
+                     self.wr_en.eq(self.sample_write | self.step_write | (self.bus_write if bus else 0))]
         self.outputs()
-        initializing = Signal(init=1, name="initializing")
+        self.initializing = initializing = Signal(init=1, name="initializing")
+        self.commit_pending, self.reset_pending = Signal(name="commit_pending"), Signal(name="reset_pending")
+        self.committing = Signal(name="committing")
         free = ~core.o.valid | core.o.ready  # no estimate waits, or it is taken now
         last_digit = self.load == len(p.sample_addrs) - 1
         idle = ~self.running
+        # a commit or a reset waits for the end of the update that runs, and holds the next sample
+        held = (self.commit_pending | self.reset_pending) if bus else Const(0, 1)
         # ready does not follow valid within a cycle: it is high once the other digits are written
-        m.d.comb += core.i.ready.eq(idle & free & last_digit)
+        m.d.comb += core.i.ready.eq(idle & free & last_digit & ~held)
+        self.start_commit, self.start_reset = Signal(name="start_commit"), Signal(name="start_reset")
+        if bus:
+            m.d.comb += [self.start_commit.eq(idle & self.commit_pending & ~self.hold_full),
+                         self.start_reset.eq(idle & ~self.commit_pending & self.reset_pending & free)]
+        self.take = take = Signal(name="take")
+        coast = core.i.payload.missing if core.missing else Const(0, 1)
         # plain assignments (Verilog `assign`), not outputs of case statements: no simulator can leave
         # them undefined at time zero while their inputs have not changed yet
         restart = initializing & (self.channel != core.channels - 1)  # the next channel's reset routine
-        m.d.comb += [self.sample_write.eq(idle & core.i.valid & free),
+        idle_pc = self.pc
+        if core.missing:
+            idle_pc = Mux(take & coast, p.start("predict"), idle_pc)
+        if bus:
+            idle_pc = Mux(self.start_commit, p.start("commit"), Mux(self.start_reset, 0, idle_pc))
+        m.d.comb += [self.sample_write.eq(idle & core.i.valid & free & ~held),
+                     take.eq(self.sample_write & last_digit),
                      self.pc_next.eq(Mux(self.issue, Mux(self.back, self.word["d"], self.pc + 1),
-                                         Mux(self.finished, Mux(restart, 0, self.update_start), self.pc)))]
+                                         Mux(self.finished, Mux(restart, 0, self.update_start), idle_pc)))]
         with m.If(self.sample_write):
             m.d.sync += self.load.eq(self.load + 1)
             with m.If(last_digit):  # the last digit: the word is taken, the update runs
@@ -364,14 +439,117 @@ class _Build:
                              self.running.eq(1)]
         with m.Elif(idle):
             m.d.sync += self.load.eq(0)
+        if bus:
+            with m.If(self.start_commit):
+                m.d.sync += [self.running.eq(1), self.committing.eq(1)]
+            with m.If(self.start_reset):
+                m.d.sync += [self.running.eq(1), initializing.eq(1), self.channel.eq(0), self.reset_pending.eq(0)]
         with m.If(self.finished):  # the last step's write is in this cycle
             m.d.sync += self.ending.eq(0)
-            with m.If(~initializing):
+            with m.If(self.committing):
+                m.d.sync += [self.committing.eq(0), self.running.eq(0), self.commit_pending.eq(0)]
+            with m.Elif(~initializing):
                 m.d.sync += [core.o.valid.eq(1), self.running.eq(0)]
             with m.Elif(~restart):  # every channel's reset state written
                 m.d.sync += [self.channel.eq(0), initializing.eq(0), self.running.eq(0)]
             with m.Else():  # the next channel's
                 m.d.sync += self.channel.eq(self.channel + 1)
+
+    def registers(self):
+        """The bus slave: the fixed registers and the settings' shadow words (``hw/regmap.py``),
+        behind Avalon-MM or AXI4-Lite. A setting's digit goes to a holding register and from it
+        into the register file in a cycle nothing else writes; a write waits (``waitrequest``,
+        no ``awready``) while the holding register is full or a commit is pending. Reads answer the
+        next cycle."""
+        from kfpga.hw.regmap import CONTROL_BITS, SETTINGS_BASE, VERSION, identity
+
+        m, core, p = self.m, self.core, self.p
+        n = p.shadow_words
+        abits = core.bus_address_bits
+        addr, wdata = Signal(abits, name="reg_addr"), Signal(32, name="reg_wdata")
+        offer, write, read = Signal(name="reg_offer"), Signal(name="reg_write"), Signal(name="reg_read")
+        stall, rdata = Signal(name="reg_stall"), Signal(32, name="reg_rdata", reset_less=True)
+        index = Signal(abits, name="setting_index")
+        m.d.comb += index.eq(addr - SETTINGS_BASE)
+        is_setting = (addr >= SETTINGS_BASE) & (index < n)
+        m.d.comb += [stall.eq(offer & is_setting & (self.hold_full | self.commit_pending)), write.eq(offer & ~stall)]
+        # a lower digit keeps 17 bits (the word's top bit 0), the top digit of each setting 18
+        tops = sum(1 << (st.shadow + st.digits - 1) for st in p.settings)
+        top_digit = Const(tops, max(n, 1)).bit_select(index[:max(1, (max(n, 1) - 1).bit_length())], 1) if n else 0
+        with m.If(write & is_setting):
+            m.d.sync += [self.hold_full.eq(1), self.hold_addr.eq(p.shadow_base + index),
+                         self.hold_data.eq(Cat(wdata[:DIGIT], wdata[DIGIT] & top_digit))]
+        with m.Elif(self.bus_write):
+            m.d.sync += self.hold_full.eq(0)
+        # the counters
+        updates, overflows, committed = (Signal(32, name=f"reg_{x}") for x in ("updates", "overflows", "committed"))
+        ovf_seen = Signal(name="reg_overflow")
+        clear = write & (addr == 2) & wdata[CONTROL_BITS["CLEAR"]]
+        with m.If(clear):
+            m.d.sync += [updates.eq(0), overflows.eq(0), committed.eq(0), ovf_seen.eq(0)]
+        with m.Else():
+            with m.If(self.take):
+                m.d.sync += updates.eq(updates + 1)
+            with m.If(core.o.valid & core.o.ready & core.o.payload.overflow):
+                m.d.sync += ovf_seen.eq(1)
+                with m.If(~overflows.all()):
+                    m.d.sync += overflows.eq(overflows + 1)
+            with m.If(self.start_commit):
+                m.d.sync += committed.eq(updates)
+        with m.If(write & (addr == 2)):
+            with m.If(wdata[CONTROL_BITS["COMMIT"]]):
+                m.d.sync += self.commit_pending.eq(1)
+            with m.If(wdata[CONTROL_BITS["RESET"]]):
+                m.d.sync += self.reset_pending.eq(1)
+        info = VERSION | (core.channels - 1) << 8 | n << 16
+        pending = Cat(self.commit_pending, self.reset_pending)
+        status = Cat(self.commit_pending, self.reset_pending, ovf_seen, self.running)
+        value = Const(0, 32)
+        for j, reg in ((0, Const(identity(core.config, core.variant), 32)), (1, Const(info, 32)), (2, pending),
+                       (3, status), (4, updates), (5, overflows), (6, committed)):
+            value = Mux(addr == j, reg, value)
+        with m.If(read):
+            m.d.sync += rdata.eq(value)
+        self.reg_port = {"addr": addr, "wdata": wdata, "offer": offer, "write": write, "read": read, "stall": stall, "rdata": rdata,
+                         "updates": updates, "committed": committed}
+        (self.avalon if core.bus == "avalon" else self.axi4lite)()
+
+    def avalon(self):
+        """Avalon-MM: word addresses, ``waitrequest`` for a setting's write that must wait, the read
+        data and ``readdatavalid`` the cycle after the read."""
+        m, core, r = self.m, self.core, self.reg_port
+        valid = Signal(name="avs_valid")
+        m.d.comb += [r["addr"].eq(core.avs_address), r["wdata"].eq(core.avs_writedata),
+                     r["offer"].eq(core.avs_write), r["read"].eq(core.avs_read),
+                     core.avs_waitrequest.eq(r["stall"]), core.avs_readdata.eq(r["rdata"]),
+                     core.avs_readdatavalid.eq(valid)]
+        m.d.sync += valid.eq(core.avs_read)
+
+    def axi4lite(self):
+        """AXI4-Lite: byte addresses; a write takes its address and data together (``awready`` and
+        ``wready`` in one cycle), answered with ``bvalid`` (OKAY); a read with ``rvalid`` the cycle
+        after it is taken (OKAY)."""
+        m, core, r = self.m, self.core, self.reg_port
+        bvalid, rvalid = Signal(name="axil_bvalid"), Signal(name="axil_rvalid")
+        offered = core.s_axil_awvalid & core.s_axil_wvalid & ~bvalid
+        take_read = core.s_axil_arvalid & ~rvalid
+        # the address of the write offered, else of the read
+        m.d.comb += [r["addr"].eq(Mux(offered, core.s_axil_awaddr[2:], core.s_axil_araddr[2:])),
+                     r["wdata"].eq(core.s_axil_wdata)]
+        accept = r["write"]
+        m.d.comb += [r["offer"].eq(offered), r["read"].eq(take_read & ~offered),
+                     core.s_axil_awready.eq(accept), core.s_axil_wready.eq(accept),
+                     core.s_axil_arready.eq(take_read & ~offered),
+                     core.s_axil_bvalid.eq(bvalid), core.s_axil_bresp.eq(0),
+                     core.s_axil_rvalid.eq(rvalid), core.s_axil_rresp.eq(0), core.s_axil_rdata.eq(r["rdata"])]
+        with m.If(accept):
+            m.d.sync += bvalid.eq(1)
+        with m.Elif(core.s_axil_bready):
+            m.d.sync += bvalid.eq(0)
+        with m.If(take_read & ~offered):
+            m.d.sync += rvalid.eq(1)
+        with m.Elif(core.s_axil_rready):
+            m.d.sync += rvalid.eq(0)
 
     def sample_port(self):
         """The register file's write port for a sample's digits: ``(enable, address, data)``, the

@@ -17,11 +17,14 @@ def channel_bits(channels):
     return max(1, (channels - 1).bit_length())
 
 
-def input_layout(config, channels, bits=None):
+def input_layout(config, channels, bits=None, *, missing=False):
     """``channel`` (``bits`` wide, default :func:`channel_bits`) and one signed field per input of
-    the filter (``y`` for one input): 16 bits, the ADC's code, or the config's wider input format."""
+    the filter (``y`` for one input): 16 bits, the ADC's code, or the config's wider input format;
+    with ``missing``, a last bit that marks a sample with no measurement (its codes are not read)."""
     fields = {"channel": unsigned(channel_bits(channels) if bits is None else bits)}
     fields.update({name: signed(config.input_format.width) for name in config.inputs})
+    if missing:
+        fields["missing"] = unsigned(1)
     return data.StructLayout(fields)
 
 

@@ -50,7 +50,7 @@ from kfpga.core.fixed import Overflow, Rounding, shift_round
 from kfpga.core.ops import Fx, Ops, quotient_bits
 
 __all__ = ["DIGIT", "WORD", "KEEP", "SHIFT", "CLEAR", "LO", "HI", "OUT", "Mac", "FoldOps", "Program", "compile_update",
-           "execute", "digits_for", "handshake_twin", "READ_LATENCY", "FLAG_LATENCY"]
+           "execute", "digits_for", "handshake_twin", "programmable_names", "Setting", "READ_LATENCY", "FLAG_LATENCY"]
 
 #: Bits a lower digit carries, and the register file's word.
 DIGIT, WORD = 17, 18
@@ -161,9 +161,20 @@ class FoldOps(Ops):
     trace does, ``kfpga/core/compiled.py``): the digits each value takes, and which writes can
     overflow."""
 
-    def __init__(self, formats):
+    def __init__(self, formats, programmable=()):
         super().__init__(formats)
         self.nodes = []
+        self.programmable = frozenset(programmable)
+
+    def constants(self, constants):
+        """The variant's constants; a :attr:`programmable` one is a word of the register file that
+        the bus writes (any integer of its format, so no product by it is specialised)."""
+        out = super().constants(constants)
+        for name in self.programmable:
+            fmt = self.fmt(constants[name].point)
+            out[name] = Fx(self._new("input", (), fmt.min_raw, fmt.max_raw, key=("const", name)), fmt.frac_bits,
+                           None, fmt, name)
+        return out
 
     def _new(self, op, args=(), lo=0, hi=0, **kw):
         self.nodes.append(_Node(op, tuple(a.node for a in args), lo, hi, **kw))
@@ -280,8 +291,9 @@ ZERO_VAL, ONE_VAL, NEG_ONE = _const_val(0), _const_val(1), _const_val(-1)
 class _Lowering:
     """Turns the trace into steps; :attr:`code` the steps, :attr:`vals` each node's digits."""
 
-    def __init__(self, nodes, state_names, sample_names, input_digits):
+    def __init__(self, nodes, state_names, sample_names, input_digits, tag="t"):
         self.nodes = nodes
+        self.tag = tag  # the temporaries' address tag: each routine has its own
         self.code = []
         self.vals = {}
         self.temps = 0  # temporary digits made so far (each its own address: "t", id, k)
@@ -293,7 +305,7 @@ class _Lowering:
     def temp(self, n, lo=0, hi=0):
         tid = self.temps
         self.temps += 1
-        return _Val(tuple(("t", tid, j) for j in range(n)), lo, hi)
+        return _Val(tuple((self.tag, tid, j) for j in range(n)), lo, hi)
 
     def emit(self, mac):
         self.code.append(mac)
@@ -373,7 +385,7 @@ class _Lowering:
     def op_input(self, i, node):
         kind, name = node.key
         n = self.input_digits if kind == "sample" else digits_for(node.lo, node.hi)
-        tag = "u" if kind == "sample" else "s"
+        tag = {"sample": "u", "state": "s", "const": "c"}[kind]
         self.vals[i] = _Val(tuple((tag, name, j) for j in range(n)), node.lo, node.hi)
 
     def op_shl(self, i, node):
@@ -740,20 +752,52 @@ class Program:
     addresses: dict = field(default_factory=dict, repr=False)
     values: dict = field(default_factory=dict, repr=False)
     nodes: list = field(default_factory=list, repr=False)
+    #: ``{routine: (first word, steps)}`` (``init``, ``update``, and ``predict``, ``commit`` when built)
+    routines: dict = field(default_factory=dict)
+    #: ``{routine: cycles}`` from its first step to its last's write
+    cycles: dict = field(default_factory=dict)
+    #: the :class:`Setting` s a bus writes (a programmable program), and the first shadow word's address
+    settings: tuple = ()
+    shadow_base: int = 0
+
+    def start(self, routine):
+        """The first word of ``routine``."""
+        return self.routines[routine][0]
+
+    def routine(self, name):
+        """The words of the routine ``name``."""
+        start, n = self.routines[name]
+        return self.words[start:start + n]
+
+    @property
+    def shadow_words(self):
+        """The register-file words a bus writes: every setting's digits."""
+        return sum(st.digits for st in self.settings)
 
     @property
     def address_bits(self):
         return max(1, (self.depth - 1).bit_length())
 
 
-def _trace(config, variant):
+def programmable_names(config, variant):
+    """What a programmable core takes from its bus: ``(constants, states)``, the names of the
+    constants quantised into a configurable point (a structural one, a shift or an exact ``1/h``,
+    stays built in: it shapes the update) and of the states whose reset value is one."""
+    from kfpga.core.spec import Constant
+
+    consts = [n for n, c in config.constants(variant).items() if isinstance(c, Constant) and isinstance(c.point, str)]
+    states = [n for n, point in config.spec.variants[variant].state_for(config.params) if isinstance(point, str)]
+    return consts, states
+
+
+def _trace(config, variant, *, predict=False, programmable=()):
     spec_variant = config.spec.variants[variant]
-    ops = FoldOps(config.formats)
+    ops = FoldOps(config.formats, programmable)
     k_ = ops.constants(config.constants(variant))
     states = spec_variant.state_for(config.params)
     x = {name: ops.input(("state", name), config.point_format(point), name) for name, point in states}
     u = {name: ops.input(("sample", name), config.input_format, name) for name in config.inputs}
-    x_next, outs = spec_variant.update(ops, k_, x, u)
+    x_next, outs = spec_variant.predict(ops, k_, x) if predict else spec_variant.update(ops, k_, x, u)
     for label, value in [*outs.items(), *x_next.items()]:
         if not isinstance(value, Fx):
             raise TypeError(f"{label}: the update must give Fx values")
@@ -771,12 +815,13 @@ def _live(nodes, roots):
     return live
 
 
-def compile_update(config, variant, *, channels=1, channel_bits=None):
-    """The :class:`Program` of ``config``'s ``variant`` for a core of ``channels`` channel states."""
-    nodes, states, x_next, outs = _trace(config, variant)
+def _routine(config, variant, tag, *, predict=False, programmable=()):
+    """One sample's routine (the update, or with ``predict`` the update of a sample with no
+    measurement): ``(lowering, output chunks, {state: digits})``; its temporaries are tagged ``tag``."""
+    nodes, states, x_next, outs = _trace(config, variant, predict=predict, programmable=programmable)
     state_names = [name for name, _ in states]
     input_digits = digits_for(config.input_format.min_raw, config.input_format.max_raw)
-    low = _Lowering(nodes, state_names, list(config.inputs), input_digits)
+    low = _Lowering(nodes, state_names, list(config.inputs), input_digits, tag)
     output_fields = [o.name for o in config.outputs]
     roots = [outs[name].raw.node for name in output_fields] + [x_next[name].raw.node for name in state_names]
     live = _live(nodes, roots)
@@ -807,32 +852,101 @@ def compile_update(config, variant, *, channels=1, channel_bits=None):
         final[name] = (v, n)
     for name, (v, n) in final.items():
         low.linear([(v, 1, 0)], n, _Val(tuple(("s", name, j) for j in range(n))))
-    update_code = low.code
-    # one channel's reset state
+    return low, chunks, {name: final[name][1] for name in state_names}
+
+
+@dataclass(frozen=True)
+class Setting:
+    """A value a programmable core takes from its bus: the constant ``name`` (``kind`` ``"c"``) or
+    the reset value of the state ``name`` (``"r"``), held in ``fmt`` as ``digits`` words of the
+    register file; the bus writes them at ``shadow`` (the index of the first, among all the
+    settings' digits), and a commit copies them to where the routines read them."""
+
+    kind: str
+    name: str
+    label: str
+    point: object
+    fmt: object
+    digits: int
+    shadow: int
+    raw: int
+
+
+def compile_update(config, variant, *, channels=1, channel_bits=None, predict=False, programmable=False):
+    """The :class:`Program` of ``config``'s ``variant`` for a core of ``channels`` channel states.
+
+    ``predict``: with a routine for a sample with no measurement (the variant's ``predict``).
+    ``programmable``: the constants and the reset state in register-file words that a bus writes
+    (through shadow words, copied between updates by the commit routine), so that no product is
+    specialised to a built-in constant; at power-up they hold the config's values."""
+    spec_variant = config.spec.variants[variant]
+    if predict and spec_variant.predict is None:
+        raise ValueError(f"the {config.spec.name} filter's {variant} variant takes every sample as a measurement: "
+                         "no update without one (missing samples do not apply)")
+    consts, resets = programmable_names(config, variant) if programmable else ((), ())
+    low, chunks, state_digits = _routine(config, variant, "t", programmable=consts)
+    routines = {"update": low.code}
+    lows = [low]
+    if predict:
+        coast, coast_chunks, _ = _routine(config, variant, "tp", predict=True, programmable=consts)
+        if coast_chunks != chunks:
+            raise AssertionError("the routines without a measurement give other output chunks")
+        routines["predict"] = coast.code
+        lows.append(coast)
+    states = spec_variant.state_for(config.params)
     reset = config.reset_state(variant)
     init_code = []
-    for name, (_, point) in zip(state_names, states, strict=True):
+    for name, point in states:
         fmt = config.point_format(point)
         n = digits_for(fmt.min_raw, fmt.max_raw)
         for dgt, value in enumerate(to_digits(reset[name], n)):
-            init_code.append(Mac(k(value), ONE, CLEAR, wr=HI, d=("s", name, dgt)))
+            init_code.append(Mac(("r", name, dgt) if name in resets else k(value), ONE, CLEAR, wr=HI,
+                                 d=("s", name, dgt)))
     if not init_code:
         init_code.append(nop())
-    state_digits = {name: final[name][1] for name in state_names}
-    return _place(config, init_code, update_code, low, state_digits, chunks, channels, channel_bits, input_digits)
+    settings = []
+    if programmable:
+        table, raw, j = config.constants(variant), config.constant_raw(variant), 0
+        points = dict(states)
+        for kind, name, point, value, label in (
+                [("c", n, table[n].point, raw[n], table[n].label or n) for n in consts]
+                + [("r", n, points[n], reset[n], f"{n}(0)") for n in resets]):
+            fmt = config.point_format(point)
+            n = digits_for(fmt.min_raw, fmt.max_raw)
+            settings.append(Setting(kind, name, label, point, fmt, n, j, value))
+            j += n
+        # the commit: every shadow word copied to the word the routines read
+        routines["commit"] = [Mac(("p", st.shadow + dgt), ONE, CLEAR, wr=HI, d=(st.kind, st.name, dgt))
+                              for st in settings for dgt in range(st.digits)] or [nop()]
+    return _place(config, init_code, routines, lows, state_digits, chunks, channels, channel_bits,
+                  digits_for(config.input_format.min_raw, config.input_format.max_raw), settings)
 
 
-def _place(config, init_code, update_code, low, state_digits, chunks, channels, channel_bits, input_digits):
+def _place(config, init_code, routines, lows, state_digits, chunks, channels, channel_bits, input_digits, settings):
     """Addresses for every word, the schedule's waits, the register file's power-up words."""
-    code = init_code + update_code
+    parts = [("init", init_code), *routines.items()]
+    code = [mac for _, part in parts for mac in part]
     consts = sorted({addr[1] for mac in code for addr in (mac.a, mac.b, mac.a2) if addr and addr[0] == "k"})
     addr = {("k", v): j for j, v in enumerate(consts)}
     samples = [(name, dgt) for name in config.inputs for dgt in range(input_digits)]
     for j, (name, dgt) in enumerate(samples):
         addr[("u", name, dgt)] = len(consts) + j
-    temp_base = len(consts) + len(samples)
-    temps = _allocate(update_code, temp_base)
-    addr.update(temps)
+    nxt = len(consts) + len(samples)
+    image = {}
+    for st in settings:  # the words the routines read, then the shadow words the bus writes
+        for dgt, value in enumerate(to_digits(st.raw, st.digits)):
+            addr[(st.kind, st.name, dgt)] = nxt
+            image[nxt] = value
+            nxt += 1
+    shadow_base = nxt
+    for st in settings:
+        for dgt, value in enumerate(to_digits(st.raw, st.digits)):
+            addr[("p", st.shadow + dgt)] = nxt
+            image[nxt] = value
+            nxt += 1
+    temp_base = nxt
+    for tag, part in (("t", routines["update"]), ("tp", routines.get("predict", []))):
+        addr.update(_allocate(part, temp_base, tag))  # the routines never run at once: the same registers
     top = max([*addr.values(), 0]) + 1
     offsets, j = {}, 0
     for name, n in state_digits.items():
@@ -850,8 +964,14 @@ def _place(config, init_code, update_code, low, state_digits, chunks, channels, 
     init = [0] * depth
     for v, a in zip(consts, range(len(consts)), strict=True):
         init[a] = v & ((1 << WORD) - 1)
+    for a, v in image.items():
+        init[a] = v & ((1 << WORD) - 1)
     words = [_resolve(mac, addr) for mac in code]
-    words[len(init_code) - 1]["end"] = words[-1]["end"] = 1  # the last step of each routine
+    starts, pos = {}, 0
+    for name, part in parts:
+        starts[name] = (pos, len(part))
+        pos += len(part)
+        words[pos - 1]["end"] = 1  # the last step of each routine
     begin = None
     for pos, w in enumerate(words):  # a loop's end holds its first step's address, its begin the count
         if w["loop"] == BEGIN:
@@ -859,16 +979,18 @@ def _place(config, init_code, update_code, low, state_digits, chunks, channels, 
         elif w["loop"] == END:
             w["d"] = begin + 1
     # each routine runs on its own: the core waits for the last step's write before another starts
-    for part in (words[:len(init_code)], words[len(init_code):]):
+    cycles = {}
+    for name, (start, n) in starts.items():
+        part = words[start:start + n]
         for w, wait in zip(part, _schedule(part), strict=True):
             w["wait"] = wait
-    acc_bits = _acc_bits(code, low)
-    init_cycles = _cycles(words[:len(init_code)])
-    update_cycles = _cycles(words[len(init_code):])
+        cycles[name] = _cycles(part)
+    acc_bits = _acc_bits(code)
     return Program(words, init, len(init_code), state_base, state_bits,
                    [(name, dgt, addr[("u", name, dgt)]) for name, dgt in samples], chunks, acc_bits, depth, channels,
-                   update_cycles, init_cycles, tuple(o.name for o in config.outputs), input_digits,
-                   {v: addr[("k", v)] for v in consts}, addr, {i: v.addrs for i, v in low.vals.items()}, low.nodes)
+                   cycles["update"], cycles["init"], tuple(o.name for o in config.outputs), input_digits,
+                   {v: addr[("k", v)] for v in consts}, addr, {i: v.addrs for i, v in lows[0].vals.items()},
+                   lows[0].nodes, starts, cycles, tuple(settings), shadow_base)
 
 
 def handshake_twin(program):
@@ -907,7 +1029,9 @@ def handshake_twin(program):
     image[1] = 1
     return dataclasses.replace(program, words=words, init=image, init_steps=1, state_base=base, state_bits=state_bits,
                                sample_addrs=samples, update_cycles=_cycles(update), init_cycles=_cycles(init),
-                               depth=depth, consts=consts, addresses={}, values={}, nodes=[])
+                               depth=depth, consts=consts, addresses={}, values={}, nodes=[],
+                               routines={"init": (0, 1), "update": (1, 3)},
+                               cycles={"init": _cycles(init), "update": _cycles(update)}, settings=(), shadow_base=0)
 
 
 def _resolve(mac, addr):
@@ -920,7 +1044,7 @@ def _resolve(mac, addr):
             "bit16": int(mac.bit16), "ovf": int(mac.ovf), "loop": mac.loop, "count": mac.count, "end": 0}
 
 
-def _lifetimes(code):
+def _lifetimes(code, tag="t"):
     """``(first, last)``: the step that first uses each temporary digit, and the last; a digit used
     inside a loop lives through the whole loop (its registers are not reused there)."""
     first, last, spans, start = {}, {}, [], None
@@ -928,7 +1052,7 @@ def _lifetimes(code):
         if mac.loop == BEGIN:
             start = pos
         for x in (mac.a, mac.b, mac.a2, mac.d if mac.wr in (LO, HI) else None):
-            if x is not None and x[0] == "t":
+            if x is not None and x[0] == tag:
                 first.setdefault(x, pos)
                 last[x] = pos
         if mac.loop == END:
@@ -940,11 +1064,11 @@ def _lifetimes(code):
     return first, last
 
 
-def _allocate(code, base):
+def _allocate(code, base, tag="t"):
     """Registers for the temporary digits from ``base`` on, each reused once its last reader has
     read it (a freed register is written again no sooner than the next step, whose write comes
     after the last read in the pipeline; with :data:`REUSE` off each digit keeps its own)."""
-    first, last = _lifetimes(code)
+    first, last = _lifetimes(code, tag)
     starts, ends = {}, {}
     for x, p in first.items():
         starts.setdefault(p, []).append(x)
@@ -1019,7 +1143,7 @@ def _cycles(words):
     return last + READ_LATENCY
 
 
-def _acc_bits(code, low):
+def _acc_bits(code):
     """The accumulator's width: the largest magnitude any step can leave in it, a digit at most
     2**17 (a constant word its own)."""
     def bound(x):
@@ -1082,24 +1206,31 @@ def _run(p, regs, words, ch, out_bits):
     return ovf
 
 
-def execute(program, samples, channels):
+def execute(program, samples, channels, *, missing=None, settings=None):
     """Run ``program`` as the core does: every step reads the register file and the flags as they
     are at its issue (a word written ``READ_LATENCY`` cycles before, a flag ``FLAG_LATENCY``), so
     that a schedule that broke the pipeline's rules gives other integers. ``samples``: one
-    ``{input: code}`` per update; ``channels``: the channel number of each. Returns
-    ``([{output: raw}], [overflow])``."""
+    ``{input: code}`` per update; ``channels``: the channel number of each; ``missing``: true
+    where a sample has no measurement (the predict routine runs); ``settings``: ``{sample index:
+    {shadow word: digit}}``, written to the shadow words and committed before that sample (a
+    programmable program). Returns ``([{output: raw}], [overflow])``."""
     p = program
     mask, sign = (1 << WORD) - 1, 1 << (WORD - 1)
     regs = [((v & mask) ^ sign) - sign for v in p.init]
-    init, update = p.words[:p.init_steps], p.words[p.init_steps:]
+    init, update = p.routine("init"), p.routine("update")
     for ch in range(p.channels):
         _run(p, regs, init, ch, {})
     outs, flags = [], []
-    for sample, ch in zip(samples, channels, strict=True):
+    for n, (sample, ch) in enumerate(zip(samples, channels, strict=True)):
+        if settings and n in settings:
+            for j, digit in settings[n].items():
+                regs[p.shadow_base + j] = digit
+            _run(p, regs, p.routine("commit"), 0, {})
         for name, dgt, a in p.sample_addrs:
             regs[a] = to_digits(int(sample[name]), p.input_digits)[dgt]
         chunks = {}
-        ovf = _run(p, regs, update, int(ch), chunks)
+        words = p.routine("predict") if missing is not None and missing[n] else update
+        ovf = _run(p, regs, words, int(ch), chunks)
         values = {}
         for j, (name, offset, width) in enumerate(p.chunks):
             values[name] = values.get(name, 0) | (chunks[j] & ((1 << width) - 1)) << offset

@@ -562,6 +562,29 @@ def full_update(ops, k, x, u):
     return state, _outputs(k, xn, yh)
 
 
+def _coast(ops, k, x):
+    """``x = [F x]_x`` and its outputs (``yh = H xl``): a sample with no measurement."""
+    n = k["n"]
+    xl = predict(ops, k, [x[f"x{i + 1}"] for i in range(n)])           # xl = F x
+    yh = observe(ops, k, xl)                                          # yh = H xl
+    xn = [ops.rq(v, f"x{i + 1}") for i, v in enumerate(xl)]
+    held = {"start": x["start"]} if "start" in k else {}              # the start waits for a measurement
+    return {**{f"x{i + 1}": xn[i] for i in range(n)}, **held}, _outputs(k, xn, yh)
+
+
+def steady_predict(ops, k, x):
+    """A sample with no measurement, constant gain: ``x = F x``."""
+    return _coast(ops, k, x)
+
+
+def full_predict(ops, k, x):
+    """A sample with no measurement: ``x = F x``, ``P = [F P F^T + G Q G^T]_p``."""
+    state, outs = _coast(ops, k, x)
+    pl = covariance_predict(ops, k, lambda i, j: x[f"p{_pname(i, j)}"])  # Pl = F P F^T + G Q G^T
+    state.update({f"p{i + 1}{j + 1}": ops.rq(v, f"p{i + 1}{j + 1}") for (i, j), v in pl.items()})
+    return state, outs
+
+
 # -- what the spec needs ----------------------------------------------------------------------------
 
 
@@ -676,10 +699,12 @@ def _full_state(params):
 
 VARIANTS = {
     "steady": Variant("steady", "constant gain K from the Riccati equation (or given): no divider",
-                      _steady_state, _steady_constants, _initial, steady_update, _steady_applies, start.hardware),
+                      _steady_state, _steady_constants, _initial, steady_update, _steady_applies, start.hardware,
+                      predict=steady_predict),
     "full": Variant("full", "time-varying gain: P, S and a restoring divider per update (two observations: "
                             "model only)", _full_state, _full_constants, _full_initial, full_update, lambda params: None,
-                    lambda params: start.hardware(params) or _full_hardware(params), _full_settled),
+                    lambda params: start.hardware(params) or _full_hardware(params), _full_settled,
+                    predict=full_predict),
 }
 
 

@@ -63,7 +63,7 @@ from kfpga.model.ranges import float_ranges, full_scale_stimulus
 from kfpga.model.reference import KalmanParams, kalman_decomposed, steady_error_std, steady_state, steady_state_gain
 
 __all__ = ["SPEC", "VARIANTS", "reference", "covariance_predict", "innovation_variance", "gains", "covariance_correct",
-           "full_products", "steady_update", "full_update"]
+           "full_products", "steady_update", "full_update", "steady_predict", "full_predict"]
 
 
 
@@ -127,6 +127,26 @@ def full_update(ops, k, x, u):
     return state, {"x1": x1, "x2": rate(ops, k, v), "yhat": xl1}
 
 
+def _held_start(k, x):
+    """The start's count, unchanged by a sample with no measurement."""
+    return {"start": x["start"]} if "start" in k else {}
+
+
+def steady_predict(ops, k, x):
+    """A sample with no measurement: ``x = Phi x`` (``x1 = [xl1]_x1``, v held)."""
+    xl1 = predict(ops, x["x1"], x["v"])                             # xl1 = x1 + v
+    x1 = ops.rq(xl1, "x1")
+    return {"x1": x1, "v": x["v"], **_held_start(k, x)}, {"x1": x1, "x2": rate(ops, k, x["v"]), "yhat": xl1}
+
+
+def full_predict(ops, k, x):
+    """A sample with no measurement: ``x = Phi x``, ``P = [Phi P Phi^T + G Q G^T]_p``."""
+    state, outs = steady_predict(ops, k, x)
+    pl = covariance_predict(ops, k, x["p11"], x["p12"], x["p21"], x["p22"])
+    state.update({f"p{n}": ops.rq(v, "p", f"p{n}") for v, n in zip(pl, ("11", "12", "21", "22"), strict=True)})
+    return state, outs
+
+
 # -- what the spec needs -----------------------------------------------------------------------
 
 
@@ -179,11 +199,13 @@ def _steady_applies(params):
 VARIANTS = {
     "steady": Variant("steady", "constant gain K_inf (an alpha-beta filter): one update per sample, no divider",
                       lambda params: (("x1", "x1"), ("v", "v"), *start.start_state(params)), _steady_constants,
-                      _initial, steady_update, _steady_applies),  # the loop runs the start (hw/cvloop.py)
+                      _initial, steady_update, _steady_applies,  # the loop runs the start (hw/cvloop.py)
+                      predict=steady_predict),
     "full": Variant("full", "time-varying gain: covariance and two restoring dividers per update",
                     lambda params: (("x1", "x1"), ("v", "v"), ("p11", "p"), ("p12", "p"), ("p21", "p"), ("p22", "p"),
                                     *start.start_state(params)),
-                    _full_constants, _full_initial, full_update, hardware=start.hardware, settled=_full_settled),
+                    _full_constants, _full_initial, full_update, hardware=start.hardware, settled=_full_settled,
+                    predict=full_predict),
 }
 
 

@@ -99,13 +99,34 @@ class FixedModel:
         self._kernels = {}
 
     # -- compiled loops --------------------------------------------------------------------
-    def kernel(self, vector=False):
-        """The compiled loop (see :func:`kfpga.core.compiled.compile_stage`); built on first use."""
-        if vector not in self._kernels:
-            self._kernels[vector] = compile_stage(
-                self._v.update, self.config.formats, constants=self.constants, state=self.state,
+    def kernel(self, vector=False, *, predict=False):
+        """The compiled loop (see :func:`kfpga.core.compiled.compile_stage`); built on first use.
+        ``predict``: the loop of samples with no measurement (the variant's ``predict``)."""
+        key = (vector, predict)
+        if key not in self._kernels:
+            update = self._v.update
+            if predict:
+                coast = self.require_predict()
+
+                def update(ops, k, x, u):
+                    return coast(ops, k, x)
+                update.__name__ = coast.__name__
+            self._kernels[key] = compile_stage(
+                update, self.config.formats, constants=self.constants, state=self.state,
                 inputs=tuple((name, self.config.input_format) for name in self.inputs), outputs=self.outputs, vector=vector)
-        return self._kernels[vector]
+        return self._kernels[key]
+
+    @property
+    def predicts(self):
+        """Whether the variant takes samples with no measurement (``run(..., missing=)``)."""
+        return self._v.predict is not None
+
+    def require_predict(self):
+        """The variant's ``predict``; ``ValueError`` naming the filter when it has none."""
+        if self._v.predict is None:
+            raise ValueError(f"the {self.spec.name} filter's {self.variant} variant takes every sample as a "
+                             "measurement: it has no update without one (missing samples do not apply)")
+        return self._v.predict
 
     def initial_state(self, batch_shape=()):
         """The state after reset, for one channel or a batch."""
@@ -139,13 +160,47 @@ class FixedModel:
             raise ValueError(f"the inputs must have one shape, not {', '.join(map(str, shapes))}")
         return out
 
-    def run(self, y, state=None):
+    def run(self, y, state=None, *, missing=None):
         """Filter raw ADC codes ``y`` (shape ``(n,)``, or ``(..., n)`` for a batch; time last).
 
         ``y`` is an array for a one-input filter, else ``{input name: array}``. ``state``
         continues a previous run (its :attr:`ModelResult.state`); by default every channel
-        starts from the reset state. Nothing passed in is changed.
+        starts from the reset state. ``missing``: booleans shaped like ``y`` (one channel),
+        true where a sample has no measurement: that update only predicts (its codes are not
+        read). Nothing passed in is changed.
         """
+        if missing is not None:
+            mask = np.asarray(missing, dtype=bool)
+            if mask.any():
+                return self._run_missing(y, state, mask)
+        return self._run(y, state)
+
+    def _run_missing(self, y, state, mask):
+        """:meth:`run` with samples that have no measurement: the runs of measured and of missing
+        samples each through their own compiled loop, the state carried from one to the next."""
+        self.require_predict()
+        codes = self._codes(y)
+        first = next(iter(codes.values()))
+        if first.ndim != 1 or mask.shape != first.shape:
+            raise ValueError(f"missing must be one flag per sample of one channel, shape {first.shape}, "
+                             f"not {mask.shape}")
+        cuts = [0, *(np.flatnonzero(mask[1:] != mask[:-1]) + 1).tolist(), len(mask)]
+        parts = []
+        for lo, hi in zip(cuts[:-1], cuts[1:], strict=True):
+            part = self._run({name: a[lo:hi] for name, a in codes.items()}, state, predict=bool(mask[lo]))
+            parts.append(part)
+            state = part.state
+        outputs = {name: np.concatenate([p.outputs[name] for p in parts]) for name in self.outputs}
+
+        def joined(attr):
+            names = dict.fromkeys(name for p in parts for name in getattr(p, attr))
+            return {name: np.concatenate([getattr(p, attr).get(name, np.zeros(len(p.overflow), dtype=bool))
+                                          for p in parts]) for name in names}
+        return ModelResult(MappingProxyType(outputs), np.concatenate([p.overflow for p in parts]),
+                           np.concatenate([p.sticky for p in parts]), state, MappingProxyType(joined("overflow_sites")),
+                           MappingProxyType(joined("overflow_points")))
+
+    def _run(self, y, state, *, predict=False):
         codes = self._codes(y)
         first = next(iter(codes.values()))
         n = first.shape[-1]
@@ -154,7 +209,7 @@ class FixedModel:
         regs = [state.values[name] for name in self.state_names]
         sticky0 = np.asarray(state.sticky, dtype=bool)
         if first.ndim == 1:
-            k = self.kernel(False)
+            k = self.kernel(False, predict=predict)
             outs = [[0] * n for _ in self.outputs]
             sites = [[] for _ in k.sites]
             columns = [codes[name].tolist() for name in self.inputs]
@@ -169,7 +224,7 @@ class FixedModel:
                 flags.append(f)
         else:
             # time first while running: each step then writes contiguous rows
-            k = self.kernel(True)
+            k = self.kernel(True, predict=predict)
             arrays = [np.empty((n, *batch), dtype=k.dtype) for _ in self.outputs]
             flags = [np.zeros((n, *batch), dtype=bool) for _ in k.sites]
             ys = [np.moveaxis(codes[name], -1, 0).astype(k.dtype) for name in self.inputs]
@@ -198,19 +253,19 @@ class FixedModel:
         return ModelResult(MappingProxyType(dict(zip(self.outputs, arrays, strict=True))), overflow, sticky, end,
                            MappingProxyType(site_flags), MappingProxyType(point_flags))
 
-    def run_ops(self, y, state=None):
+    def run_ops(self, y, state=None, *, missing=None):
         """The same as :meth:`run`, through :class:`~kfpga.core.ops.IntOps` one sample at a time (slow)."""
-        return self._step(IntOps, lambda ops, v: v.raw, y, state)
+        return self._step(IntOps, lambda ops, v: v.raw, y, state, missing)
 
-    def run_exact(self, y):
+    def run_exact(self, y, *, missing=None):
         """The exact-rational spec (:class:`~kfpga.core.ops.FractionOps`), one channel, from reset.
 
         Every value is a ``Fraction`` written once into its point's format: no shift, alignment
         or rounding code is shared with :meth:`run`, only the equations. Very slow; for tests.
         """
-        return self._step(FractionOps, lambda ops, v: ops.raw_of(v), y, None)
+        return self._step(FractionOps, lambda ops, v: ops.raw_of(v), y, None, missing)
 
-    def _step(self, backend, raw_of, y, state):
+    def _step(self, backend, raw_of, y, state, missing=None):
         codes = self._codes(y)
         first = next(iter(codes.values()))
         state = self.initial_state(first.shape[:-1]) if state is None else state
@@ -226,7 +281,10 @@ class FixedModel:
             k = ops.constants(self.constants)
             xs = {name: ops.input(x[name], points[name], name) for name in self.state_names}
             u = {name: ops.input(codes[name][..., t], self.config.input_format, name) for name in self.inputs}
-            nxt, o = self._v.update(ops, k, xs, u)
+            if missing is not None and missing[t]:
+                nxt, o = self.require_predict()(ops, k, xs)
+            else:
+                nxt, o = self._v.update(ops, k, xs, u)
             x = {name: raw_of(ops, nxt[name]) for name in self.state_names}
             for name in self.outputs:
                 outs[name].append(raw_of(ops, o[name]))
@@ -241,21 +299,23 @@ class FixedModel:
         end = ModelState(MappingProxyType(x), sticky[..., -1].copy())
         return ModelResult(MappingProxyType(arrays), ovf, sticky, end, MappingProxyType({}))
 
-    def run_channels(self, y, channel, states=None):
+    def run_channels(self, y, channel, states=None, *, missing=None):
         """Filter an interleaved multi-channel stream: each channel keeps its own state.
 
         Returns ``(outputs, overflow, states)``: ``{field: raw array}`` and the per-sample flag
-        in input order, and a new ``{channel: ModelState}`` (``states`` is not changed).
+        in input order, and a new ``{channel: ModelState}`` (``states`` is not changed);
+        ``missing`` as in :meth:`run`, in input order.
         """
         codes = self._codes(y)
         channel = np.asarray(channel)
+        missing = np.zeros(len(channel), dtype=bool) if missing is None else np.asarray(missing, dtype=bool)
         n = len(channel)
         states = dict(states or {})
         outs = {name: np.zeros(n, dtype=np.int64) for name in self.outputs}
         overflow = np.zeros(n, dtype=bool)
         for ch in np.unique(channel):
             idx = np.flatnonzero(channel == ch)
-            res = self.run({name: a[idx] for name, a in codes.items()}, states.get(int(ch)))
+            res = self.run({name: a[idx] for name, a in codes.items()}, states.get(int(ch)), missing=missing[idx])
             states[int(ch)] = res.state
             for name in self.outputs:
                 outs[name][idx] = res.outputs[name]

@@ -132,6 +132,10 @@ class Variant:
         ``settled(params) -> [(label, value, point), ...]``: values the update settles to (the
         steady-state covariance of a time-varying gain), which, like the constants, their
         points must hold within 1 %.
+    predict:
+        ``predict(ops, k, x) -> (x_next, outputs)``: the update of a sample with no measurement
+        (a lost sample: ``x = F x``, ``P = F P F' + G Q G'``), the same outputs; ``None``: every
+        sample is a measurement.
     """
 
     name: str
@@ -143,6 +147,7 @@ class Variant:
     applies: Callable = field(default=lambda params: None)  # params -> None or why not
     hardware: Callable = field(default=lambda params: None)  # params -> None or why the parallel core cannot
     settled: Callable = field(default=lambda params: [])  # params -> [(label, value, point)]
+    predict: Callable | None = None  # (ops, k, x) -> (x_next, outputs) with no measurement
 
     def state_for(self, params):
         """``((name, point), ...)`` of a model with these parameters."""
