@@ -583,9 +583,9 @@ class _Build:
         m.d.sync += sticky.eq(core.overflow)
 
 
-def make_core(config, variant, *, channels=1, stages=None):
-    """The folded core of any filter's ``variant`` (``channels`` channel states); ``stages`` does not
-    apply (it runs one step at a time)."""
+def make_core(config, variant, *, channels=1, stages=None, missing=False, bus=None):
+    """The folded core of any filter's ``variant`` (``channels`` channel states), with the missing
+    bit and a register bus if asked; ``stages`` does not apply (it runs one step at a time)."""
     if stages is not None:
         raise ValueError("stages applies to a pipelined loop; the folded core runs one step at a time")
-    return FoldedCore(config, variant, channels=channels)
+    return FoldedCore(config, variant, channels=channels, missing=missing, bus=bus)

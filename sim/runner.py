@@ -52,7 +52,8 @@ def _design_verilog(out_dir, design, config, opts):
     if design == "core":
         path, _ = write_block(out_dir, "core", config, variant=opts["variant"], channels=opts.get("channels", 1),
                               architecture=opts.get("architecture"),
-                              **({"stages": opts["stages"]} if opts.get("stages") is not None else {}))
+                              **({"stages": opts["stages"]} if opts.get("stages") is not None else {}),
+                              **{k: opts[k] for k in ("missing", "bus") if opts.get(k)})
     elif design == "divider":
         path, _ = write_block(out_dir, "divider", ratio=opts.get("ratio", 10))
     elif design == "frontend":

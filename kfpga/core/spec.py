@@ -452,7 +452,15 @@ class FilterSpec:
     def make_core(self, config, variant, *, channels=1, architecture=None, **options):
         """The Amaranth core of ``variant`` on ``architecture`` (default: the parallel core where it
         runs, else the folded one; the RTL module is imported on first use); ``options`` go to
-        the core (``stages=L`` for a pipelined loop)."""
+        the core (``stages=L`` for a pipelined loop; ``missing=True``, the input's no-measurement
+        bit, and ``bus="avalon"`` or ``"axi4lite"``, the register slave: the folded core only)."""
+        folded_only = [name for name in ("missing", "bus") if options.get(name)]
+        if folded_only and architecture == "parallel":
+            raise ValueError(f"{' and '.join(folded_only)} apply to the folded core, not the parallel one")
+        if folded_only:
+            architecture = "folded"
+        else:
+            options = {k: v for k, v in options.items() if k not in ("missing", "bus")}
         architecture = architecture or self.architectures(variant, config.params)[0]
         why = self.why_not(variant, config.params, architecture)
         if why:

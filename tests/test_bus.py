@@ -1,0 +1,79 @@
+"""The programmable core: settings written on its bus mid-stream, samples with no measurement.
+
+The cocotb bench (``sim/test_bus.py``) drives the Avalon-MM slave with cocotbext-avalon and the
+AXI4-Lite one with cocotbext-axi, on the paper's filter and the README's tracker, both variants,
+on Verilator and Icarus: two new Q/R phases written while the stream runs, a fifth of the
+samples missing, every estimate the model's that switches config at the sample the core
+reports (``COMMITTED``). The register values come from ``kfpga regs``'s flow
+(:func:`kfpga.flows.regs.settings_for`), the model's switch from the configs themselves.
+"""
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from kfpga.core.config import FilterConfig
+from kfpga.flows.regs import bus_writes, new_config, program_for, settings_for
+from kfpga.hw.regmap import identity
+from kfpga.sim.runner import SIMULATORS, build, run
+from tests.helpers.simulators import need
+
+pytestmark = pytest.mark.cosim
+
+ROOT = Path(__file__).resolve().parents[1]
+TRACKER = ROOT / "examples" / "models" / "tracker.toml"
+
+#: The filters of the check, and two new (Q, R) each: within the formats their default configs
+#: get, as a core built for them takes.
+CASES = {
+    "kalman2": (lambda: FilterConfig(), [dict(Q=1.0, R=6.0), dict(Q=3.0, R=3.0)]),
+    "tracker": (lambda: FilterConfig.from_toml(TRACKER),
+                [dict(Q=((0.25,),), R=((36.0,),)), dict(Q=((0.5,),), R=((16.0,),))]),
+}
+
+
+def phases(config, variant, program, changes):
+    out = []
+    for change in changes:
+        params = dataclasses.replace(config.params, **change)
+        new = new_config(config, variant, params)
+        writes = bus_writes(settings_for(config, variant, params, program=program), program, config, variant)
+        out.append({"config_toml": new.to_toml(), "writes": [[index, value] for index, value, _ in writes]})
+    return out
+
+
+@pytest.mark.parametrize("simulator", SIMULATORS)
+@pytest.mark.parametrize("bus", ["avalon", "axi4lite"])
+@pytest.mark.parametrize("variant", ["steady", "full"])
+@pytest.mark.parametrize("case", list(CASES))
+def test_settings_written_mid_stream_are_bit_exact(case, variant, bus, simulator, seed):
+    need(simulator)
+    make, changes = CASES[case]
+    config = make()
+    program = program_for(config, variant, missing=True)
+    samples = 300 if simulator == "verilator" else 150
+    params = {"variant": variant, "seed": seed, "samples": samples, "bus": bus, "missing": 0.2,
+              "config_toml": config.to_toml(), "phases": phases(config, variant, program, changes),
+              "id": identity(config, variant), "p_idle": 0.2, "p_ready": 0.8}
+    built = build(simulator, "core", config=config, variant=variant, missing=True, bus=bus)
+    result = run(built, "test_bus", testcase="settings_mid_stream", params=params)
+    assert result["ok"] and result["mismatches"] == 0, result
+    assert len(result["switches"]) == 2 and result["missing"] > 0, result
+
+
+@pytest.mark.parametrize("simulator", SIMULATORS)
+@pytest.mark.parametrize("variant", ["steady", "full"])
+@pytest.mark.parametrize("case", list(CASES))
+def test_missing_samples_without_a_bus_are_bit_exact(case, variant, simulator, seed):
+    """The folded core with the missing bit and no bus: a fifth of the samples missing, at random
+    backpressure, every estimate the model's (which predicts only there)."""
+    need(simulator)
+    config = CASES[case][0]()
+    samples = 400 if simulator == "verilator" else 150
+    params = {"variant": variant, "seed": seed, "samples": samples, "missing": 0.2, "config_toml": config.to_toml(),
+              "p_idle": 0.3, "p_ready": 0.7}
+    result = run(build(simulator, "core", config=config, variant=variant, missing=True), "test_bus",
+                 testcase="settings_mid_stream", params=params)
+    assert result["ok"] and result["mismatches"] == 0 and result["missing"] > 0, result
