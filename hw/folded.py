@@ -390,19 +390,8 @@ class _Build:
         reset, then the update's for each sample (the predict routine's for a sample with no
         measurement); with a bus, the commit routine and the reset routine between two updates."""
         m, core, p = self.m, self.core, self.p
-        self.sample_write, self.sample_addr, self.sample_data = self.sample_port()
         bus = core.bus is not None
-        # the bus's write of a setting's digit: in a cycle the sample and the steps leave free
-        self.bus_write = Signal(name="bus_write")
-        self.hold_full = Signal(name="hold_full")
-        self.hold_addr = Signal(self.abits, name="hold_addr", reset_less=True)
-        self.hold_data = Signal(WORD, name="hold_data", reset_less=True)
-        m.d.comb += self.bus_write.eq(self.hold_full & ~self.sample_write & ~self.step_write)
-        m.d.comb += [self.wr_addr.eq(Mux(self.sample_write, self.sample_addr,
-                                         Mux(self.step_write, self.step_addr, self.hold_addr) if bus else self.step_addr)),
-                     self.wr_data.eq(Mux(self.sample_write, self.sample_data,
-                                         Mux(self.step_write, self.digit, self.hold_data) if bus else self.digit)),
-                     self.wr_en.eq(self.sample_write | self.step_write | (self.bus_write if bus else 0))]
+        self.write_port()
         self.outputs()
         self.initializing = initializing = Signal(init=1, name="initializing")
         self.commit_pending, self.reset_pending = Signal(name="commit_pending"), Signal(name="reset_pending")
@@ -454,6 +443,23 @@ class _Build:
                 m.d.sync += [self.channel.eq(0), initializing.eq(0), self.running.eq(0)]
             with m.Else():  # the next channel's
                 m.d.sync += self.channel.eq(self.channel + 1)
+
+    def write_port(self):
+        """The register file's one write port: a sample's digit, a step's, or (with a bus) a
+        setting's digit from the holding register, in a cycle the other two leave free."""
+        m, bus = self.m, self.core.bus is not None
+        self.sample_write, self.sample_addr, self.sample_data = self.sample_port()
+        self.bus_write = Signal(name="bus_write")
+        self.hold_full = Signal(name="hold_full")
+        self.hold_addr = Signal(self.abits, name="hold_addr", reset_less=True)
+        self.hold_data = Signal(WORD, name="hold_data", reset_less=True)
+        m.d.comb += self.bus_write.eq(self.hold_full & ~self.sample_write & ~self.step_write)
+        addr, data = self.step_addr, self.digit
+        if bus:
+            addr, data = Mux(self.step_write, addr, self.hold_addr), Mux(self.step_write, data, self.hold_data)
+        m.d.comb += [self.wr_addr.eq(Mux(self.sample_write, self.sample_addr, addr)),
+                     self.wr_data.eq(Mux(self.sample_write, self.sample_data, data)),
+                     self.wr_en.eq(self.sample_write | self.step_write | (self.bus_write if bus else 0))]
 
     def registers(self):
         """The bus slave: the fixed registers and the settings' shadow words (``hw/regmap.py``),

@@ -931,20 +931,7 @@ def _place(config, init_code, routines, lows, state_digits, chunks, channels, ch
     samples = [(name, dgt) for name in config.inputs for dgt in range(input_digits)]
     for j, (name, dgt) in enumerate(samples):
         addr[("u", name, dgt)] = len(consts) + j
-    nxt = len(consts) + len(samples)
-    image = {}
-    for st in settings:  # the words the routines read, then the shadow words the bus writes
-        for dgt, value in enumerate(to_digits(st.raw, st.digits)):
-            addr[(st.kind, st.name, dgt)] = nxt
-            image[nxt] = value
-            nxt += 1
-    shadow_base = nxt
-    for st in settings:
-        for dgt, value in enumerate(to_digits(st.raw, st.digits)):
-            addr[("p", st.shadow + dgt)] = nxt
-            image[nxt] = value
-            nxt += 1
-    temp_base = nxt
+    image, shadow_base, temp_base = _place_settings(addr, settings, len(consts) + len(samples))
     for tag, part in (("t", routines["update"]), ("tp", routines.get("predict", []))):
         addr.update(_allocate(part, temp_base, tag))  # the routines never run at once: the same registers
     top = max([*addr.values(), 0]) + 1
@@ -967,6 +954,34 @@ def _place(config, init_code, routines, lows, state_digits, chunks, channels, ch
     for a, v in image.items():
         init[a] = v & ((1 << WORD) - 1)
     words = [_resolve(mac, addr) for mac in code]
+    starts, cycles = _finish(words, parts)
+    acc_bits = _acc_bits(code)
+    return Program(words, init, len(init_code), state_base, state_bits,
+                   [(name, dgt, addr[("u", name, dgt)]) for name, dgt in samples], chunks, acc_bits, depth, channels,
+                   cycles["update"], cycles["init"], tuple(o.name for o in config.outputs), input_digits,
+                   {v: addr[("k", v)] for v in consts}, addr, {i: v.addrs for i, v in lows[0].vals.items()},
+                   lows[0].nodes, starts, cycles, tuple(settings), shadow_base)
+
+
+def _place_settings(addr, settings, nxt):
+    """Addresses from ``nxt`` on for the settings' words: first those the routines read, then the
+    shadow words the bus writes (both hold the config's values at power-up). Returns ``(power-up
+    words {address: digit}, the first shadow word's address, the next free address)``."""
+    image = {}
+    for keys in ((lambda st, dgt: (st.kind, st.name, dgt)), (lambda st, dgt: ("p", st.shadow + dgt))):
+        for st in settings:
+            for dgt, value in enumerate(to_digits(st.raw, st.digits)):
+                addr[keys(st, dgt)] = nxt
+                image[nxt] = value
+                nxt += 1
+    shadow = addr[("p", 0)] if settings else nxt
+    return image, shadow, nxt
+
+
+def _finish(words, parts):
+    """Mark each routine's last step, resolve the loops, schedule each routine on its own (the core
+    waits for a routine's last write before another starts). Returns ``({routine: (first word,
+    steps)}, {routine: cycles})``."""
     starts, pos = {}, 0
     for name, part in parts:
         starts[name] = (pos, len(part))
@@ -978,19 +993,13 @@ def _place(config, init_code, routines, lows, state_digits, chunks, channels, ch
             begin, w["d"] = pos, w["count"] - 1
         elif w["loop"] == END:
             w["d"] = begin + 1
-    # each routine runs on its own: the core waits for the last step's write before another starts
     cycles = {}
     for name, (start, n) in starts.items():
         part = words[start:start + n]
         for w, wait in zip(part, _schedule(part), strict=True):
             w["wait"] = wait
         cycles[name] = _cycles(part)
-    acc_bits = _acc_bits(code)
-    return Program(words, init, len(init_code), state_base, state_bits,
-                   [(name, dgt, addr[("u", name, dgt)]) for name, dgt in samples], chunks, acc_bits, depth, channels,
-                   cycles["update"], cycles["init"], tuple(o.name for o in config.outputs), input_digits,
-                   {v: addr[("k", v)] for v in consts}, addr, {i: v.addrs for i, v in lows[0].vals.items()},
-                   lows[0].nodes, starts, cycles, tuple(settings), shadow_base)
+    return starts, cycles
 
 
 def handshake_twin(program):

@@ -118,7 +118,7 @@ def systemrdl(regs, name="kfpga_regs"):
     lines = [f"addrmap {name} {{", '    name = "kfpga programmable core";',
              "    default regwidth = 32;", "    default accesswidth = 32;"]
     for reg in regs:
-        lines.append(f"    reg {{")
+        lines.append("    reg {")
         lines.append(f'        desc = "{_rdl_text(reg.description)}";')
         for field, lsb, width, desc in reg.fields:
             hw = "hw = w;" if "r" in reg.access and reg.access != "rw" else "hw = r;"

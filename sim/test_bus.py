@@ -70,6 +70,26 @@ def expected(configs, variant, codes, missing, switches):
             "overflow": np.concatenate([p.overflow for p in parts]).astype(int)}
 
 
+async def write_phases(dut, bus, sink, phases, n):
+    """Each phase's writes once its share of the estimates is out; then the commit awaited and
+    ``COMMITTED`` read: the sample each phase starts at."""
+    switches = []
+    for j, phase in enumerate(phases):
+        target = (j + 1) * n // (len(phases) + 1)
+        while len(sink.words) < target:
+            await RisingEdge(dut.clk)
+        for index, value in phase["writes"]:
+            await bus.write(index, value)
+        for _ in range(BUS_TIMEOUT_CYCLES // 8):  # the commit waits for the update that runs
+            if not (await bus.read(STATUS)) & (1 << STATUS_BITS["COMMIT_PENDING"]):
+                break
+            await ClockCycles(dut.clk, 4)
+        else:
+            raise AssertionError(f"phase {j}: the commit did not take effect")
+        switches.append(await bus.read(COMMITTED))
+    return switches
+
+
 @cocotb.test(**deadline(200, default_samples=600))
 async def settings_mid_stream(dut):
     """New settings at run time: every estimate equals the model's that switches at COMMITTED."""
@@ -97,20 +117,7 @@ async def settings_mid_stream(dut):
     words = [{"channel": 0, "y": int(c), "missing": int(m)} for c, m in zip(codes, missing, strict=True)]
     sending = cocotb.start_soon(source.send(words))
     collecting = cocotb.start_soon(sink.run(n))
-    switches = []
-    for j, phase in enumerate(phases):
-        target = (j + 1) * n // (len(phases) + 1)
-        while len(sink.words) < target:
-            await RisingEdge(dut.clk)
-        for index, value in phase["writes"]:
-            await bus.write(index, value)
-        for _ in range(BUS_TIMEOUT_CYCLES // 8):  # the commit waits for the update that runs
-            if not (await bus.read(STATUS)) & (1 << STATUS_BITS["COMMIT_PENDING"]):
-                break
-            await ClockCycles(dut.clk, 4)
-        else:
-            raise AssertionError(f"phase {j}: the commit did not take effect")
-        switches.append(await bus.read(COMMITTED))
+    switches = await write_phases(dut, bus, sink, phases, n)
     per_sample = 20 * 5000  # ns: far more than any update of these models takes
     await with_timeout(collecting, n * per_sample + 100_000, "ns")
     await sending

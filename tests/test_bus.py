@@ -11,7 +11,6 @@ reports (``COMMITTED``). The register values come from ``kfpga regs``'s flow
 import dataclasses
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from kfpga.core.config import FilterConfig
@@ -28,9 +27,9 @@ TRACKER = ROOT / "examples" / "models" / "tracker.toml"
 #: The filters of the check, and two new (Q, R) each: within the formats their default configs
 #: get, as a core built for them takes.
 CASES = {
-    "kalman2": (lambda: FilterConfig(), [dict(Q=1.0, R=6.0), dict(Q=3.0, R=3.0)]),
+    "kalman2": (lambda: FilterConfig(), [{"Q": 1.0, "R": 6.0}, {"Q": 3.0, "R": 3.0}]),
     "tracker": (lambda: FilterConfig.from_toml(TRACKER),
-                [dict(Q=((0.25,),), R=((36.0,),)), dict(Q=((0.5,),), R=((16.0,),))]),
+                [{"Q": ((0.25,),), "R": ((36.0,),)}, {"Q": ((0.5,),), "R": ((16.0,),)}]),
 }
 
 

@@ -10,6 +10,7 @@ exact rationals (:class:`~kfpga.core.ops.FractionOps`); the tests hold all of th
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
@@ -186,7 +187,7 @@ class FixedModel:
                              f"not {mask.shape}")
         cuts = [0, *(np.flatnonzero(mask[1:] != mask[:-1]) + 1).tolist(), len(mask)]
         parts = []
-        for lo, hi in zip(cuts[:-1], cuts[1:], strict=True):
+        for lo, hi in itertools.pairwise(cuts):
             part = self._run({name: a[lo:hi] for name, a in codes.items()}, state, predict=bool(mask[lo]))
             parts.append(part)
             state = part.state
