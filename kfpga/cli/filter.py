@@ -7,7 +7,7 @@ import numpy as np
 
 from kfpga.cli import common
 from kfpga.core import registry
-from kfpga.core.errors import UsageError
+from kfpga.core.errors import InputError, UsageError
 
 
 def add_parser(sub):
@@ -15,7 +15,10 @@ def add_parser(sub):
                        description="Read the input columns of a CSV file (signed 16-bit ADC codes, one row per sample: "
                                    "'y', or the model's observation names) and write every output of the filter and, "
                                    "for fixed point, the per-sample overflow flag, in input units, one row per input "
-                                   "row.")
+                                   "row. A row whose input cells are empty (a blank line in a one-column file) is a "
+                                   "sample with no measurement: a filter that can predict only (kalman2, kalman) "
+                                   "coasts over it (x = F x, P = F P F' + G Q G'), and the output marks it in a "
+                                   "'missing' column.")
     p.add_argument("--input", required=True, metavar="CSV", help="input file with the filter's input columns")
     p.add_argument("--output", required=True, metavar="CSV", help="output file")
     common.add_filter_args(p)
@@ -53,7 +56,16 @@ def run(args):
     config = common.load_config(args)
     chosen = _mode(args, config)
     columns_in = chosen[0].columns(config, chosen[1]) if chosen else config.inputs
-    samples = read_samples(args.input, clip=args.clip, columns=columns_in, bits=config.input_format.width)
+    coasts = not chosen and config.spec.variants[args.variant].predict is not None
+    try:
+        samples = read_samples(args.input, clip=args.clip, columns=columns_in, bits=config.input_format.width,
+                               missing=coasts)
+    except InputError as exc:
+        if coasts or not ("no value in column" in str(exc) or "a blank line" in str(exc)):
+            raise
+        raise InputError(f"{exc} (the {config.filter} filter's {args.variant} variant takes every sample as a "
+                         "measurement: it cannot coast over an empty one)") from None
+    lost = samples.missing if coasts and samples.missing.any() else None
     kind = "float64" if args.float else "bit-accurate fixed-point"
     if chosen:
         mode, value = chosen
@@ -62,12 +74,15 @@ def run(args):
         form = f"{mode.option} {value}" if value is not True else mode.option
     else:
         if args.float:
-            columns = dict(float_run(config, args.variant, samples.y))
+            columns = dict(float_run(config, args.variant, samples.y, lost))
         else:
             model = FixedModel(config, variant=args.variant)
-            res = model.run(samples.y)
+            res = model.run(samples.y, missing=lost)
             columns = {**model.to_float(res), "overflow": res.overflow}
         what, form = f"{len(samples)} samples", f"{args.variant} variant"
+        if lost is not None:
+            columns["missing"] = lost.astype(int)
+            what += f" ({int(lost.sum())} with no measurement, predicted only)"
     write_columns(args.output, columns)
     note = [f"{what} filtered ({config.filter} filter, {form}, {kind}) -> {args.output}"]
     if samples.clipped:
@@ -80,6 +95,6 @@ def run(args):
 
 #: The examples ending ``kfpga filter --help``.
 EXAMPLES = (
-    'kfpga filter --config tracker.toml --input log.csv --output estimates.csv',
+    'kfpga filter --config tracker.toml --input log.csv --output estimates.csv   # empty cells: lost samples',
     'kfpga filter --filter alpha-beta --tracks 40 --input plots.csv --output tracks.csv',
 )

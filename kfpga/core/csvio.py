@@ -24,6 +24,7 @@ class Samples:
     truth: np.ndarray | None  # float, when the file has a ``truth`` column
     clipped: int  # values saturated because of ``clip=True``
     path: str
+    missing: np.ndarray | None = None  # per row: no measurement (every code cell empty), when allowed
 
     @property
     def y(self):
@@ -62,13 +63,14 @@ class Table:
     line: int = 1  # of the header (comment lines may come first)
 
 
-def read_table(path, *, single="y", unnamed=False):
+def read_table(path, *, single="y", unnamed=False, blank_rows=False):
     """Read ``path`` as a table: a UTF-8 BOM, ``#`` comment lines and blank lines at the end are
     dropped; the separator is a comma, a semicolon or a tab (the one the first line uses most);
     the first line is a header unless all its cells are numbers. A file of one column with no
     header is the column ``single``; several columns with no header are refused, or with
     ``unnamed`` named ``column 1``, ``column 2``, ... A blank line among the rows is refused
-    (every row is a sample), naming its line."""
+    (every row is a sample), naming its line; with ``blank_rows`` it is a row of empty cells (a
+    sample with no measurement in a one-column file)."""
     path = Path(path)
     text = read_text(path, what="file")
     lines = [(n, line) for n, line in enumerate(text.splitlines(), start=1) if not line.lstrip().startswith("#")]
@@ -95,13 +97,13 @@ def read_table(path, *, single="y", unnamed=False):
         names = [single]
     rows = list(zip([n for n, _ in lines], cells, strict=True))[1 if header else 0:]
     for n, row in rows:
-        if not any(cell.strip() for cell in row):
+        if not blank_rows and not any(cell.strip() for cell in row):
             raise InputError(f"{path}: line {n}: a blank line; every row is a sample (delete the line, or give it a "
                              "value)")
     return Table(names, rows, header, separator, lines[0][0])
 
 
-def read_samples(path, *, clip=False, column="y", columns=None, bits=16):
+def read_samples(path, *, clip=False, column="y", columns=None, bits=16, missing=False):
     """Read the ``y`` column (signed 16-bit ADC codes, or ``bits``-bit integers), or each of
     ``columns``, and ``truth`` if present.
 
@@ -110,24 +112,44 @@ def read_samples(path, *, clip=False, column="y", columns=None, bits=16):
     bytes that are not UTF-8, no rows, a missing code column or one named twice, a blank line
     among the rows, a cell that is empty, not a number, NaN, not an integer, or outside
     [-32768, 32767] (unless ``clip``, which saturates such values and counts them).
+
+    With ``missing``, a row whose code cells are all empty (a blank line in a one-column file) is
+    a sample with no measurement: its codes read 0 and :attr:`Samples.missing` marks it; a row
+    with some of them empty is refused.
     """
     path = Path(path)
     wanted = list(columns) if columns is not None else [column]
-    table = read_table(path, single=wanted[0])
+    table = read_table(path, single=wanted[0], blank_rows=missing)
     names = table.names
     codes, truths, clipped = {c: [] for c in wanted}, [], 0
     for name in (*wanted, "truth"):
         if names.count(name) > 1:
             raise InputError(f"{path}: line {table.line}: the header names column {name!r} twice")
-    missing = [c for c in wanted if c not in names]
-    if missing:
-        need = f"no column named {missing[0]!r}" if len(missing) == 1 else \
-            f"no columns named {' and '.join(repr(c) for c in missing)}"
+    absent = [c for c in wanted if c not in names]
+    if absent:
+        need = f"no column named {absent[0]!r}" if len(absent) == 1 else \
+            f"no columns named {' and '.join(repr(c) for c in absent)}"
         raise InputError(f"{path}: line {table.line}: {need} (the header has: {', '.join(names) or 'nothing'})")
     index = {c: names.index(c) for c in wanted}
     it = names.index("truth") if "truth" in names else None
+    lost = []
     for line, row in table.rows:
         where = f"{path}: line {line}"
+        empty = [name for name, iy in index.items() if iy >= len(row) or not row[iy].strip()]
+        if missing and empty:
+            if len(empty) != len(index):
+                given = [name for name in index if name not in empty]
+                raise InputError(f"{where}: {', '.join(given)} given but {', '.join(empty)} empty: a sample with no "
+                                 "measurement leaves every input cell empty")
+            lost.append(True)
+            for name in index:
+                codes[name].append(0)
+            if it is not None and it < len(row) and row[it].strip():
+                truths.append(_number(row[it], where, "truth"))
+            elif it is not None:
+                raise InputError(f"{where}: no value in column 'truth'")
+            continue
+        lost.append(False)
         for name, iy in index.items():
             value, out = _code(row, iy, name, where, bits, clip)
             clipped += out
@@ -139,7 +161,8 @@ def read_samples(path, *, clip=False, column="y", columns=None, bits=16):
     if not codes[wanted[0]]:
         raise InputError(f"{path}: no data rows after the header")
     truth = np.array(truths, dtype=np.float64) if it is not None else None
-    return Samples({c: np.array(v, dtype=np.int64) for c, v in codes.items()}, truth, clipped, str(path))
+    return Samples({c: np.array(v, dtype=np.int64) for c, v in codes.items()}, truth, clipped, str(path),
+                   np.array(lost, dtype=bool) if missing else None)
 
 
 def _code(row, iy, name, where, bits, clip):

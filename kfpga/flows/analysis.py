@@ -59,9 +59,44 @@ def sqnr_db(reference, test):
     return 10.0 * np.log10(signal / noise)
 
 
-def float_run(config, variant, y):
-    """The float reference of the config's filter on ``y``: ``{output: float array}`` in input units."""
+def float_run(config, variant, y, missing=None):
+    """The float reference of the config's filter on ``y``: ``{output: float array}`` in input units.
+
+    With ``missing`` (true where a sample has no measurement) it is the filter's own equations in
+    float64 (:func:`coast_float_run`): the reference functions take every sample as a measurement."""
+    if missing is not None and np.any(missing):
+        return coast_float_run(config, variant, y, missing)
     return config.spec.reference(config.params, variant, y)
+
+
+def coast_float_run(config, variant, y, missing):
+    """The variant's update (and, where ``missing``, its predict) in float64, sample by sample, on
+    :class:`~kfpga.core.ops.FloatOps`: the model's equations with nothing rounded. ``ValueError``
+    for a variant that takes every sample as a measurement."""
+    from kfpga.core.ops import FloatOps
+
+    v = config.spec.variants[variant]
+    if v.predict is None:
+        raise ValueError(f"the {config.spec.name} filter's {variant} variant takes every sample as a measurement: "
+                         "missing samples do not apply")
+    states = v.state_for(config.params)
+    constants = v.constants(config.params)
+    codes = y if isinstance(y, dict) else {config.inputs[0]: y}
+    x = {name: float(value) for name, value in v.initial(config.params).items()}
+    outs = {name: np.empty(len(missing)) for name in config.output_names}
+    for t, lost in enumerate(np.asarray(missing, dtype=bool)):
+        ops = FloatOps(config.formats)
+        k = ops.constants(constants)
+        xs = {name: ops.input(x[name], point, name) for name, point in states}
+        if lost:
+            nxt, o = v.predict(ops, k, xs)
+        else:
+            u = {name: ops.input(float(codes[name][t]), config.input_format, name) for name in config.inputs}
+            nxt, o = v.update(ops, k, xs, u)
+        x = {name: float(nxt[name].raw) for name in x}
+        for name in outs:
+            outs[name][t] = float(o[name].raw)
+    return outs
 
 
 @dataclass
