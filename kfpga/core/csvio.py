@@ -135,23 +135,10 @@ def read_samples(path, *, clip=False, column="y", columns=None, bits=16, missing
     lost = []
     for line, row in table.rows:
         where = f"{path}: line {line}"
-        empty = [name for name, iy in index.items() if iy >= len(row) or not row[iy].strip()]
-        if missing and empty:
-            if len(empty) != len(index):
-                given = [name for name in index if name not in empty]
-                raise InputError(f"{where}: {', '.join(given)} given but {', '.join(empty)} empty: a sample with no "
-                                 "measurement leaves every input cell empty")
-            lost.append(True)
-            for name in index:
-                codes[name].append(0)
-            if it is not None and it < len(row) and row[it].strip():
-                truths.append(_number(row[it], where, "truth"))
-            elif it is not None:
-                raise InputError(f"{where}: no value in column 'truth'")
-            continue
-        lost.append(False)
+        gone = missing and _lost(row, index, where)
+        lost.append(gone)
         for name, iy in index.items():
-            value, out = _code(row, iy, name, where, bits, clip)
+            value, out = (0, 0) if gone else _code(row, iy, name, where, bits, clip)
             clipped += out
             codes[name].append(value)
         if it is not None:
@@ -163,6 +150,16 @@ def read_samples(path, *, clip=False, column="y", columns=None, bits=16, missing
     truth = np.array(truths, dtype=np.float64) if it is not None else None
     return Samples({c: np.array(v, dtype=np.int64) for c, v in codes.items()}, truth, clipped, str(path),
                    np.array(lost, dtype=bool) if missing else None)
+
+
+def _lost(row, index, where):
+    """Whether ``row`` is a sample with no measurement: every code cell empty (some of them: refused)."""
+    empty = [name for name, iy in index.items() if iy >= len(row) or not row[iy].strip()]
+    if empty and len(empty) != len(index):
+        given = [name for name in index if name not in empty]
+        raise InputError(f"{where}: {', '.join(given)} given but {', '.join(empty)} empty: a sample with no "
+                         "measurement leaves every input cell empty")
+    return bool(empty)
 
 
 def _code(row, iy, name, where, bits, clip):
