@@ -50,8 +50,11 @@ CASES = [
     ("filter-input-latin1", ["filter", "--input", "in.csv", "--output", "o.csv"], {"in.csv": LATIN1},
      "in.csv: line 2: byte 0xe9 is not UTF-8; save the file as UTF-8"),
     ("filter-input-dir", ["filter", "--input", "d", "--output", "o.csv"], {"d/x": ""}, "d: is a directory, not a file"),
-    ("filter-blank-line", ["filter", "--input", "in.csv", "--output", "o.csv"], {"in.csv": "y\n1\n\n2\n"},
-     "in.csv: line 3: a blank line; every row is a sample (delete the line, or give it a value)"),
+    # a blank line is a sample with no measurement for a filter that can coast, else refused
+    ("filter-blank-line", ["filter", "--filter", "tukey53h", "--input", "in.csv", "--output", "o.csv"],
+     {"in.csv": "y\n1\n\n2\n"},
+     "in.csv: line 3: a blank line; every row is a sample (delete the line, or give it a value) (the tukey53h "
+     "filter's online variant takes every sample as a measurement: it cannot coast over an empty one)"),
     ("filter-duplicate-column", ["filter", "--input", "in.csv", "--output", "o.csv"], {"in.csv": "y,y\n1,2\n"},
      "in.csv: line 1: the header names column 'y' twice"),
     ("filter-bad-value", ["filter", "--input", "in.csv", "--output", "o.csv"], {"in.csv": "y\n1\nabc\n"},
@@ -156,8 +159,11 @@ CASES = [
      "at most +-131072"),
     ("model-r-out-of-reach", ["compare", "--config", "k.toml"], {"k.toml": "[model]\nR = 1e14\n"}, None),
     # CSV files: what is still refused, with its line
-    ("csv-blank-middle", ["filter", "--input", "i.csv", "--output", "o.csv"], {"i.csv": "y\n1\n\n2\n"},
-     "i.csv: line 3: a blank line; every row is a sample (delete the line, or give it a value)"),
+    ("csv-half-empty", ["filter", "--config", "k.toml", "--input", "i.csv", "--output", "o.csv"],
+     {"k.toml": "[filter]\nname = \"kalman\"\n[model]\nF = [[1.0, 1.0], [0.0, 1.0]]\nG = [[0.5], [1.0]]\n"
+                "Q = [[1.0]]\nH = [[1.0, 0.0], [0.0, 1.0]]\nR = [[4.0, 0.0], [0.0, 4.0]]\n",
+      "i.csv": "y1,y2\n1,2\n,3\n"},
+     "i.csv: line 3: y2 given but y1 empty: a sample with no measurement leaves every input cell empty"),
     ("csv-headerless-two", ["filter", "--input", "i.csv", "--output", "o.csv"], {"i.csv": "1,2\n3,4\n"},
      "i.csv: line 1: no header line; name the 2 columns in a first line (for example y,truth)"),
     ("csv-semicolon-missing", ["filter", "--input", "i.csv", "--output", "o.csv"], {"i.csv": "y;truth\n1;2\n3\n"},
