@@ -405,7 +405,7 @@ class _Build:
         m.d.comb += core.i.ready.eq(idle & free & last_digit & ~held)
         self.start_commit, self.start_reset = Signal(name="start_commit"), Signal(name="start_reset")
         if bus:
-            m.d.comb += [self.start_commit.eq(idle & self.commit_pending & ~self.hold_full),
+            m.d.comb += [self.start_commit.eq(idle & self.commit_pending),
                          self.start_reset.eq(idle & ~self.commit_pending & self.reset_pending & free)]
         self.take = take = Signal(name="take")
         coast = core.i.payload.missing if core.missing else Const(0, 1)
@@ -446,28 +446,29 @@ class _Build:
 
     def write_port(self):
         """The register file's one write port: a sample's digit, a step's, or (with a bus) a
-        setting's digit from the holding register, in a cycle the other two leave free."""
+        setting's digit, in a cycle the other two leave free."""
         m, bus = self.m, self.core.bus is not None
         self.sample_write, self.sample_addr, self.sample_data = self.sample_port()
+        # a setting's digit, straight from the bus (registers() drives them): the bus waits while
+        # the port is taken
         self.bus_write = Signal(name="bus_write")
-        self.hold_full = Signal(name="hold_full")
-        self.hold_addr = Signal(self.abits, name="hold_addr", reset_less=True)
-        self.hold_data = Signal(WORD, name="hold_data", reset_less=True)
-        m.d.comb += self.bus_write.eq(self.hold_full & ~self.sample_write & ~self.step_write)
+        self.bus_addr = Signal(self.abits, name="bus_addr")
+        self.bus_data = Signal(WORD, name="bus_data")
+        self.port_busy = Signal(name="port_busy")
+        m.d.comb += self.port_busy.eq(self.sample_write | self.step_write)
         addr, data = self.step_addr, self.digit
         if bus:
-            addr, data = Mux(self.step_write, addr, self.hold_addr), Mux(self.step_write, data, self.hold_data)
+            addr, data = Mux(self.step_write, addr, self.bus_addr), Mux(self.step_write, data, self.bus_data)
         m.d.comb += [self.wr_addr.eq(Mux(self.sample_write, self.sample_addr, addr)),
                      self.wr_data.eq(Mux(self.sample_write, self.sample_data, data)),
                      self.wr_en.eq(self.sample_write | self.step_write | (self.bus_write if bus else 0))]
 
     def registers(self):
         """The bus slave: the fixed registers and the settings' shadow words (``hw/regmap.py``),
-        behind Avalon-MM or AXI4-Lite. A setting's digit goes to a holding register and from it
-        into the register file in a cycle nothing else writes; a write waits (``waitrequest``,
-        no ``awready``) while the holding register is full or a commit is pending. Reads answer the
-        next cycle."""
-        from kfpga.hw.regmap import CONTROL_BITS, SETTINGS_BASE, VERSION, identity
+        behind Avalon-MM or AXI4-Lite. A setting's digit goes into the register file in a cycle
+        nothing else writes it; a write waits (``waitrequest``, no ``awready``) while the port is
+        taken or a commit is pending. Reads answer the next cycle."""
+        from kfpga.hw.regmap import CONTROL_BITS, COUNT_BITS, SETTINGS_BASE, VERSION, identity
 
         m, core, p = self.m, self.core, self.p
         n = p.shadow_words
@@ -475,20 +476,17 @@ class _Build:
         addr, wdata = Signal(abits, name="reg_addr"), Signal(32, name="reg_wdata")
         offer, write, read = Signal(name="reg_offer"), Signal(name="reg_write"), Signal(name="reg_read")
         stall, rdata = Signal(name="reg_stall"), Signal(32, name="reg_rdata", reset_less=True)
-        index = Signal(abits, name="setting_index")
-        m.d.comb += index.eq(addr - SETTINGS_BASE)
-        is_setting = (addr >= SETTINGS_BASE) & (index < n)
-        m.d.comb += [stall.eq(offer & is_setting & (self.hold_full | self.commit_pending)), write.eq(offer & ~stall)]
+        is_setting = (addr >= SETTINGS_BASE) & (addr < SETTINGS_BASE + n)
+        # a setting's write waits while the register file's write port is taken or a commit is pending
+        m.d.comb += [stall.eq(offer & is_setting & (self.port_busy | self.commit_pending)), write.eq(offer & ~stall)]
         # a lower digit keeps 17 bits (the word's top bit 0), the top digit of each setting 18
-        tops = sum(1 << (st.shadow + st.digits - 1) for st in p.settings)
-        top_digit = Const(tops, max(n, 1)).bit_select(index[:max(1, (max(n, 1) - 1).bit_length())], 1) if n else 0
-        with m.If(write & is_setting):
-            m.d.sync += [self.hold_full.eq(1), self.hold_addr.eq(p.shadow_base + index),
-                         self.hold_data.eq(Cat(wdata[:DIGIT], wdata[DIGIT] & top_digit))]
-        with m.Elif(self.bus_write):
-            m.d.sync += self.hold_full.eq(0)
+        tops = sum(1 << (SETTINGS_BASE + st.shadow + st.digits - 1) for st in p.settings)
+        top_digit = Const(tops, SETTINGS_BASE + max(n, 1)).bit_select(addr, 1)
+        m.d.comb += [self.bus_write.eq(write & is_setting),
+                     self.bus_addr.eq(addr + (p.shadow_base - SETTINGS_BASE)),
+                     self.bus_data.eq(Cat(wdata[:DIGIT], wdata[DIGIT] & top_digit))]
         # the counters
-        updates, overflows, committed = (Signal(32, name=f"reg_{x}") for x in ("updates", "overflows", "committed"))
+        updates, overflows, committed = (Signal(COUNT_BITS, name=f"reg_{x}") for x in ("updates", "overflows", "committed"))
         ovf_seen = Signal(name="reg_overflow")
         clear = write & (addr == 2) & wdata[CONTROL_BITS["CLEAR"]]
         with m.If(clear):
@@ -498,7 +496,7 @@ class _Build:
                 m.d.sync += updates.eq(updates + 1)
             with m.If(core.o.valid & core.o.ready & core.o.payload.overflow):
                 m.d.sync += ovf_seen.eq(1)
-                with m.If(~overflows.all()):
+                with m.If(~overflows.all()):  # it holds at its largest value
                     m.d.sync += overflows.eq(overflows + 1)
             with m.If(self.start_commit):
                 m.d.sync += committed.eq(updates)

@@ -24,13 +24,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = ["Register", "register_map", "identity", "identity_text", "systemrdl", "export", "SETTINGS_BASE",
-           "VERSION", "CONTROL_BITS", "STATUS_BITS", "ID", "INFO", "CONTROL", "STATUS", "UPDATES", "OVERFLOWS",
+           "VERSION", "COUNT_BITS", "CONTROL_BITS", "STATUS_BITS", "ID", "INFO", "CONTROL", "STATUS", "UPDATES", "OVERFLOWS",
            "COMMITTED"]
 
 #: The map's version, in ``INFO``.
 VERSION = 1
 #: The word index of the first setting's first digit (the fixed registers are below).
 SETTINGS_BASE = 16
+#: Bits of the counters UPDATES, OVERFLOWS and COMMITTED (a 16-bit counter costs half a 32-bit one's
+#: logic cells; UPDATES and COMMITTED wrap, and are read as differences modulo 2**16).
+COUNT_BITS = 16
 #: Word indices of the fixed registers.
 ID, INFO, CONTROL, STATUS, UPDATES, OVERFLOWS, COMMITTED = range(7)
 #: ``CONTROL``'s bits (write 1 to act; a read gives the commit and reset still pending).
@@ -93,11 +96,12 @@ def register_map(program, config, variant):
                   ("RESET_PENDING", 1, 1, "a reset waits"),
                   ("OVERFLOW", 2, 1, "an estimate saturated (or wrapped) since CLEAR"),
                   ("RUNNING", 3, 1, "a routine runs"))),
-        Register("UPDATES", 4, "r", "Samples taken since CLEAR (wraps at 2**32)", (("COUNT", 0, 32, "samples"),)),
-        Register("OVERFLOWS", 5, "r", "Estimates with the overflow flag since CLEAR (holds at 2**32 - 1)",
-                 (("COUNT", 0, 32, "estimates"),)),
+        Register("UPDATES", 4, "r", f"Samples taken since CLEAR (wraps at 2**{COUNT_BITS})",
+                 (("COUNT", 0, COUNT_BITS, "samples"),)),
+        Register("OVERFLOWS", 5, "r", f"Estimates with the overflow flag since CLEAR (holds at 2**{COUNT_BITS} - 1)",
+                 (("COUNT", 0, COUNT_BITS, "estimates"),)),
         Register("COMMITTED", 6, "r", "UPDATES when the last commit took effect: that sample and the later ones "
-                 "ran with the new settings", (("COUNT", 0, 32, "samples"),)),
+                 "ran with the new settings", (("COUNT", 0, COUNT_BITS, "samples"),)),
     ]
     for st in program.settings:
         what = "constant" if st.kind == "c" else "reset value of state"

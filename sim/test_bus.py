@@ -147,3 +147,63 @@ async def settings_mid_stream(dut):
         assert identity == p["id"], report
     assert not phases or (differ["unswitched"] and differ["one_early"]), report
     assert not missing.any() or differ["measured"], report
+
+
+@cocotb.test(**deadline(200, default_samples=200))
+async def reset_and_clear(dut):
+    """A soft reset from new reset values: half the samples, then the new settings committed,
+    ``CONTROL.RESET`` and ``CONTROL.CLEAR``; the second half must be the new config's model from its
+    reset state, ``UPDATES`` count it alone, and the estimates before the reset the old model's."""
+    from kfpga.hw.regmap import CONTROL, CONTROL_BITS
+
+    p = sim_params()
+    seed, variant, n = p["seed"], p["variant"], int(p.get("samples", 200))
+    dut._log.info(f"seed {seed}")
+    config, new = load_config(p), load_config(p["phases"][0])
+    codes = stress_codes(seed, n)
+    missing = np.random.default_rng(seed).random(n) < float(p.get("missing", 0.0))
+    Clock(dut.clk, SYSTEM_PERIOD_NS, unit="ns").start()
+    source = StreamSource(dut, "i", dut.clk, input_layout(config, 1, missing=True), rng=random.Random(seed + 1),
+                          p_idle=p.get("p_idle", 0.0))
+    sink = StreamSink(dut, "o", dut.clk, output_layout(config, 1), rng=random.Random(seed + 2),
+                      p_ready=p.get("p_ready", 1.0))
+    dut.rst.value = 1
+    bus = Bus(dut, p["bus"])
+    await ClockCycles(dut.clk, 3)
+    dut.rst.value = 0
+    await RisingEdge(dut.clk)
+    words = [{"channel": 0, "y": int(c), "missing": int(m)} for c, m in zip(codes, missing, strict=True)]
+    half = n // 2
+    per_sample = 20 * 5000
+    collecting = cocotb.start_soon(sink.run(n))
+    await with_timeout(source.send(words[:half]), half * per_sample + 100_000, "ns")
+    while len(sink.words) < half:
+        await RisingEdge(dut.clk)
+    before = await bus.read(UPDATES)
+    for index, value in p["phases"][0]["writes"]:  # the digits, then COMMIT
+        await bus.write(index, value)
+    await bus.write(CONTROL, (1 << CONTROL_BITS["RESET"]) | (1 << CONTROL_BITS["CLEAR"]))
+    for _ in range(BUS_TIMEOUT_CYCLES // 8):
+        if not (await bus.read(STATUS)) & 0b11:  # neither the commit nor the reset pending
+            break
+        await ClockCycles(dut.clk, 4)
+    else:
+        raise AssertionError("the reset did not take effect")
+    cleared = await bus.read(UPDATES)
+    await with_timeout(source.send(words[half:]), (n - half) * per_sample + 100_000, "ns")
+    await with_timeout(collecting, n * per_sample + 100_000, "ns")
+    after = await bus.read(UPDATES)
+    first = FixedModel(config, variant=variant).run(codes[:half], missing=missing[:half])
+    second = FixedModel(new, variant=variant).run(codes[half:], missing=missing[half:])  # from the new reset state
+    want = {name: np.concatenate([first.outputs[name], second.outputs[name]]) for name in first.outputs}
+    want["overflow"] = np.concatenate([first.overflow, second.overflow]).astype(int)
+    mismatches = [(i, name, int(w[name]), int(want[name][i])) for i, w in enumerate(sink.words) for name in want
+                  if int(w[name]) != int(want[name][i])]
+    carried = FixedModel(new, variant=variant).run(codes[half:], first.state, missing=missing[half:])
+    report = {"ok": not mismatches and len(sink.words) == n, "samples": n, "mismatches": len(mismatches),
+              "first": mismatches[:5], "updates_before": before, "updates_cleared": cleared, "updates_after": after,
+              "reset_matters": int(sum(np.count_nonzero(carried.outputs[k] != second.outputs[k]) for k in first.outputs))}
+    write_results(p, report)
+    assert report["ok"], report
+    assert before == half and cleared == 0 and after == n - half, report
+    assert report["reset_matters"], report

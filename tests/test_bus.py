@@ -76,3 +76,20 @@ def test_missing_samples_without_a_bus_are_bit_exact(case, variant, simulator, s
     result = run(build(simulator, "core", config=config, variant=variant, missing=True), "test_bus",
                  testcase="settings_mid_stream", params=params)
     assert result["ok"] and result["mismatches"] == 0 and result["missing"] > 0, result
+
+
+@pytest.mark.parametrize("simulator", SIMULATORS)
+@pytest.mark.parametrize(("case", "variant", "bus"), [("kalman2", "full", "avalon"), ("tracker", "steady", "axi4lite")])
+def test_a_soft_reset_starts_from_the_new_reset_values(case, variant, bus, simulator, seed):
+    """New x0 and P0 committed, then CONTROL.RESET and CLEAR between two halves of a stream."""
+    need(simulator)
+    config = CASES[case][0]()
+    program = program_for(config, variant, missing=True)
+    change = ({"x0": (100.0, -2.0), "P0": ((20.0, 0.0), (0.0, 5.0))} if case == "kalman2"
+              else {"x0": (50.0, 1.0, 0.0), "R": ((36.0,),)})
+    params = {"variant": variant, "seed": seed, "samples": 160 if simulator == "verilator" else 80, "bus": bus,
+              "missing": 0.2, "config_toml": config.to_toml(), "phases": phases(config, variant, program, [change]),
+              "p_idle": 0.2, "p_ready": 0.8}
+    result = run(build(simulator, "core", config=config, variant=variant, missing=True, bus=bus), "test_bus",
+                 testcase="reset_and_clear", params=params)
+    assert result["ok"], result
