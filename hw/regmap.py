@@ -57,6 +57,13 @@ class Register:
     digit: int = 0
 
     @property
+    def title(self):
+        """A short name: the description up to its first colon or parenthesis."""
+        cut = min((i for i in (self.description.find(":"), self.description.find(" (")) if i > 0),
+                  default=len(self.description))
+        return self.description[:cut]
+
+    @property
     def offset(self):
         """Its byte offset."""
         return 4 * self.index

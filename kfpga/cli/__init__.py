@@ -24,6 +24,7 @@ from kfpga.cli import (
     generate,
     pins,
     propose,
+    regs,
     resources,
     simulate,
     sweep,
@@ -33,8 +34,8 @@ from kfpga.cli import (
 __all__ = ["main", "build_parser", "synopsis"]
 
 #: The commands in the order ``kfpga --help`` lists them.
-COMMANDS = (compare, sweep, propose, evaluate, filters, filter, formats, explore, generate, pins, resources, simulate,
-            testbench)
+COMMANDS = (compare, sweep, propose, evaluate, filters, filter, formats, explore, generate, regs, pins, resources,
+            simulate, testbench)
 
 
 def build_parser():

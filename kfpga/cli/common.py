@@ -358,7 +358,7 @@ def need_hz(config, channels):
     return (config.board.sample_rate_hz or 0.0) * channels
 
 
-def explore(config, variant, channels, *, quiet=False):
+def explore(config, variant, channels, *, quiet=False, missing=False, bus=None):
     """Every candidate design (``kfpga.flows.explore``), with a progress bar."""
     from kfpga.flows.explore import candidates
 
@@ -371,7 +371,7 @@ def explore(config, variant, channels, *, quiet=False):
             bar.refresh()
 
         found = candidates(config, variant, channels=channels, clock_hz=config.board.clock_hz,
-                           need_hz=need_hz(config, channels), progress=progress)
+                           need_hz=need_hz(config, channels), progress=progress, missing=missing, bus=bus)
         bar.n = len(found)
     return found
 
@@ -404,10 +404,13 @@ def architecture(args, config, channels):
 
     chosen = args.architecture
     args.candidates = None
+    missing, bus = getattr(args, "missing", False), getattr(args, "bus", None)
+    if (missing or bus) and chosen == "parallel":
+        raise UsageError(f"--architecture parallel: {'--bus' if bus else '--missing'} applies to the folded core")
     if chosen != "auto":
         check_architecture(args, config)
         return chosen
-    found = explore(config, args.variant, channels, quiet=getattr(args, "quiet", False))
+    found = explore(config, args.variant, channels, quiet=getattr(args, "quiet", False), missing=missing, bus=bus)
     args.candidates = found
     best = choose(found)
     if best is None and not any(c.fits for c in found):
@@ -425,6 +428,23 @@ def architecture(args, config, channels):
     info(f"architecture: {best.label} ({best.logic_cells} logic cells, {best.fmax_mhz:g} MHz estimated{margin}; "
          "'kfpga explore' lists the others)")
     return best.architecture
+
+
+def add_bus_args(p):
+    """--missing and --bus: the folded core's no-measurement bit and register bus."""
+    p.add_argument("--missing", action="store_true",
+                   help="the input's no-measurement bit: a sample with it set is predicted only (folded core; "
+                        "kalman2, kalman)")
+    p.add_argument("--bus", choices=("avalon", "axi4lite"),
+                   help="a register slave on the folded core: the constants (K, F, Q, R terms) and reset values "
+                        "written at run time (kfpga regs), a soft reset, counters")
+
+
+def check_bus_args(args, config):
+    """``--missing`` on a variant that cannot predict only is refused."""
+    if getattr(args, "missing", False) and config.spec.variants[args.variant].predict is None:
+        raise UsageError(f"--missing: the {config.filter} filter's {args.variant} variant takes every sample as a "
+                         "measurement (it has no update without one)")
 
 
 def add_json(p, what="print one JSON object"):

@@ -16,12 +16,15 @@ def add_parser(sub):
                                    "the one --architecture auto builds, is the cheapest (logic cells, then "
                                    "multipliers, then M4K bits) whose estimate is at least 1.25 x the clock and "
                                    "whose throughput covers the need. Estimates are cached (~/.cache/kfpga).",
-                       epilog="example: kfpga explore --config my.toml --plot build/explore.png")
+                       epilog="example: kfpga explore --config my.toml --plot build/explore.png; "
+                              "kfpga explore --config my.toml --bus avalon (the folded core with its register bus, "
+                              "and what the bus costs)")
     common.add_filter_args(p)
     p.add_argument("--channels", type=int, default=1, metavar="N",
                    help="channel states in the core (default: 1; the board has 1 or 6)")
     p.add_argument("--config", metavar="TOML", help="model parameters, formats and [board] rate")
-    common.add_json(p, "print the candidates as a JSON list")
+    common.add_bus_args(p)
+    common.add_json(p, "print the candidates as a JSON list (with --bus: and the bus's cost)")
     p.add_argument("--plot", metavar="PNG", help="draw logic cells against throughput, the need and the chosen one marked")
     common.add_quiet(p)
     p.set_defaults(func=run)
@@ -35,13 +38,20 @@ def run(args):
         raise UsageError(f"--channels must be 1..512, not {args.channels}")
     plot = common.check_plot(args.plot)
     config = common.load_config(args, hardware=True)
-    found = common.explore(config, args.variant, args.channels, quiet=args.quiet)
+    common.check_bus_args(args, config)
+    found = common.explore(config, args.variant, args.channels, quiet=args.quiet, missing=args.missing, bus=args.bus)
+    cost = None
+    if args.bus:
+        from kfpga.flows.explore import bus_cost
+
+        cost = bus_cost(config, args.variant, channels=args.channels, missing=args.missing, bus=args.bus)
     best = choose(found)
     need = common.need_hz(config, args.channels)
     if plot:
         _plot(found, need, plot, f"kfpga explore: {config.filter} {args.variant}, {args.channels} channel(s)")
     if args.json:
-        common.emit_json([c.as_dict() for c in found])
+        common.emit_json({"candidates": [c.as_dict() for c in found], "bus": cost} if cost else
+                         [c.as_dict() for c in found])
         return 0
     clock = config.board.clock_hz / 1e6
     rate = config.board.sample_rate_hz
@@ -58,6 +68,11 @@ def run(args):
         print(f"  {c.label:<24}{c.logic_cells:>12}{c.mul18:>7}{c.memory_bits:>10}{c.fmax_mhz:>10.1f}"
               f"{c.cycles_per_update:>8}{c.updates_per_s:>12.4g}  {'yes' if not misses else 'no (' + ', '.join(misses) + ')'}"
               f"{mark}")
+    if cost:
+        goal = "within" if cost["within_goal"] else "over"
+        print(f"  the {args.bus} register bus: +{cost['logic_cells']} logic cells, +{cost['m4k_blocks']} M4K "
+              f"({cost['base_logic_cells']} -> {cost['logic_cells_with_bus']} LE; {goal} the goal of "
+              f"{cost['goal_logic_cells']}), {cost['fmax_mhz_estimate']:.1f} MHz estimated; only the folded core has it")
     if best is None and not any(c.fits for c in found):
         print("  no design fits the EP2C20: generate refuses them")
     elif best is None:

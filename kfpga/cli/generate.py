@@ -34,6 +34,7 @@ def add_parser(sub):
                         "self-checking testbench in tb/; --channels N is then its channel states (1..256)")
     p.add_argument("--prefix", metavar="NAME", help="with --core-only: the core's module name, and the prefix of its "
                                                     "submodules (default: kfpga_FILTER)")
+    common.add_bus_args(p)
     common.add_quiet(p)
     p.set_defaults(func=run)
 
@@ -43,6 +44,10 @@ def run(args):
         return _run_core_only(args)
     if args.prefix is not None:
         common.not_with("--prefix", "the board's design", "it names the core of --core-only")
+    for option, value in (("--bus", args.bus), ("--missing", args.missing or None)):
+        if value is not None:
+            common.not_with(option, "the board's design", "the board's top has no bus pins and its ADC measures every "
+                                                          "sample: use it with --core-only")
     args.ratio = 10 if args.ratio is None else args.ratio
     return _run_board(args)
 
@@ -61,21 +66,33 @@ def _run_core_only(args):
     common.warn_precision(config)
     prefix = common.core_prefix(args, config)
     common.check_architecture(args, config)
+    common.check_bus_args(args, config)
+    options = {**({"missing": True} if args.missing else {}), **({"bus": args.bus} if args.bus else {})}
     try:
-        config.spec.make_core(config, args.variant, channels=args.channels,
+        config.spec.make_core(config, args.variant, channels=args.channels, **options,
                               **({} if args.architecture in (None, "auto") else {"architecture": args.architecture}))
     except ValueError as exc:
         raise UsageError(f"--channels {args.channels}: {exc}") from None
     architecture = common.architecture(args, config, args.channels)
     timing = _timing(args, config, architecture)
+    cost = None
+    if args.bus:
+        from kfpga.flows.explore import bus_cost
+
+        cost = bus_cost(config, args.variant, channels=args.channels, missing=args.missing, bus=args.bus)
     with atomic_dir(args.out) as folder:
         manifest = write_core(folder, config, variant=args.variant, prefix=prefix, channels=args.channels,
-                              architecture=architecture, stages=args.stages, timing=timing)
+                              architecture=architecture, stages=args.stages, timing=timing, missing=args.missing,
+                              bus=args.bus, bus_cost=cost)
     print(f"wrote {args.out}/: {', '.join(manifest['files'])}")
     print(f"  module {prefix}: {config.filter} filter, {args.variant} variant on the {manifest['architecture']} core, "
           f"{args.channels} channel state(s), latency {manifest['latency_cycles']} cycles, "
           f"{manifest['cycles_per_update']} cycle(s) per update; datasheet: {args.out}/README.txt; "
           f"testbench: {args.out}/tb/run_icarus.sh")
+    if cost:
+        goal = "within" if cost["within_goal"] else "over"
+        print(f"  {args.bus} register bus: +{cost['logic_cells']} logic cells ({goal} the {cost['goal_logic_cells']} LE "
+              f"goal), map {prefix}_regs.h/.md/.rdl; settings for new Q/R: kfpga regs")
     if not args.no_lint:
         _lint(args.out, prefix)
     return 0
@@ -156,9 +173,12 @@ def _timing(args, config, architecture):
     from kfpga.flows.explore import choose
     from kfpga.hw.generate import figures_only
 
-    every = args.candidates or common.explore(config, args.variant, args.channels, quiet=args.quiet)
+    missing, bus = getattr(args, "missing", False), getattr(args, "bus", None)
+    every = args.candidates or common.explore(config, args.variant, args.channels, quiet=args.quiet, missing=missing,
+                                              bus=bus)
+    options = {**({"missing": True} if missing else {}), **({"bus": bus} if bus else {})}
     core = figures_only(config.spec.make_core(config, args.variant, channels=args.channels, architecture=architecture,
-                                              **({} if args.stages is None else {"stages": args.stages})))
+                                              **({} if args.stages is None else {"stages": args.stages}), **options))
     design = next(c for c in every if c.architecture == architecture and c.stages == getattr(core, "stages", None))
     if not design.fits:
         raise UsageError(f"the {design.label} design does not fit the EP2C20: it takes {design.over_device}")

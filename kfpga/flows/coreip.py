@@ -55,6 +55,8 @@ VERILOG_KEYWORDS = frozenset((
 
 #: The receiver's ready in the testbench: high on READY_PER_1024 of 1024 cycles (an LFSR draws it).
 READY_PER_1024 = 717
+#: The share of the testbench's samples marked missing on a core with the missing bit.
+MISSING_SHARE = 0.2
 
 
 def check_prefix(prefix):
@@ -85,7 +87,8 @@ def interface(config, core):
     fmt = {o.name: config.output_format(o.name) for o in config.outputs}
     notes = {"channel": "channel (state) number, 0..channels-1; an input beyond the last gives a zero state's "
                         "estimate and changes nothing",
-             "overflow": "this estimate saturated somewhere in its update (the sample's own flag)"}
+             "overflow": "this estimate saturated somewhere in its update (the sample's own flag)",
+             "missing": "1: this sample has no measurement (its codes are not read): the update only predicts"}
 
     def fields(port, output):
         rows = []
@@ -119,21 +122,61 @@ def interface(config, core):
          "fields": fields(core.o, True)},
         {"name": "overflow", "direction": "output", "width": 1,
          "description": "sticky: some estimate since reset saturated (or wrapped, in a wrap format)"},
+        *_bus_ports(core),
     ]
 
 
-def _make(config, variant, channels, architecture, stages):
-    options = {"architecture": architecture, **({} if stages is None else {"stages": stages})}
+#: What each bus port does (Avalon-MM slave ``avs_*``, AXI4-Lite slave ``s_axil_*``).
+BUS_PORTS = {
+    "avs_address": "word address (byte offset / 4) of the register (README: register map)",
+    "avs_write": "write the register at avs_address", "avs_writedata": "the value written",
+    "avs_read": "read the register at avs_address", "avs_readdata": "the value read, with avs_readdatavalid",
+    "avs_readdatavalid": "avs_readdata holds the value read (the cycle after the read)",
+    "avs_waitrequest": "hold the write: a setting waits for the register file's write port, or for a commit",
+    "s_axil_awaddr": "write address (bytes)", "s_axil_awprot": "unused", "s_axil_awvalid": "write address valid",
+    "s_axil_awready": "write address and data taken (together)", "s_axil_wdata": "the value written",
+    "s_axil_wstrb": "unused: every write is a whole register", "s_axil_wvalid": "write data valid",
+    "s_axil_wready": "write address and data taken (together)", "s_axil_bresp": "OKAY (0)",
+    "s_axil_bvalid": "write response", "s_axil_bready": "write response taken",
+    "s_axil_araddr": "read address (bytes)", "s_axil_arprot": "unused", "s_axil_arvalid": "read address valid",
+    "s_axil_arready": "read address taken", "s_axil_rdata": "the value read", "s_axil_rresp": "OKAY (0)",
+    "s_axil_rvalid": "read data valid (the cycle after the address is taken, held until taken)",
+    "s_axil_rready": "read data taken",
+}
+
+
+def _bus_ports(core):
+    """The register bus's ports of a programmable core (none without one)."""
+    out = []
+    for name, member in core.signature.members.items():
+        if name in BUS_PORTS:
+            out.append({"name": name, "direction": "input" if member.flow.name == "In" else "output",
+                        "width": member.shape.width if hasattr(member.shape, "width") else int(member.shape),
+                        "description": BUS_PORTS[name]})
+    return out
+
+
+def _bus_ties(core):
+    """The testbench's connections of the bus ports: inputs held at 0, outputs open."""
+    return "".join(f", .{p['name']}({p['width']}'d0)" if p["direction"] == "input" else f", .{p['name']}()"
+                   for p in _bus_ports(core))
+
+
+def _make(config, variant, channels, architecture, stages, missing=False, bus=None):
+    options = {"architecture": architecture, **({} if stages is None else {"stages": stages}),
+               **({"missing": True} if missing else {}), **({"bus": bus} if bus else {})}
     return config.spec.make_core(config, variant, channels=channels, **options)
 
 
 def write_core(out_dir, config, *, variant, prefix, channels=1, architecture=None, stages=None, samples=500, seed=1,
-               scenario=None, timing=None):
-    """Write the core-only folder (see the module's text) into ``out_dir``; returns the manifest."""
+               scenario=None, timing=None, missing=False, bus=None, bus_cost=None):
+    """Write the core-only folder (see the module's text) into ``out_dir``; returns the manifest.
+    ``missing``, ``bus``: the folded core's no-measurement bit and register bus (then its map,
+    ``PREFIX_regs.rdl``, ``.h``, ``.md``, too); ``bus_cost``: the bus's figures, for the datasheet."""
     check_prefix(prefix)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    core = _make(config, variant, channels, architecture, stages)
+    core = _make(config, variant, channels, architecture, stages, missing, bus)
     text = to_verilog(core, prefix)
     modules = re.findall(r"^module (\S+?)\(", text, re.M)
     stray = [m for m in modules if m != prefix and not m.startswith(prefix + "__")]
@@ -146,7 +189,13 @@ def write_core(out_dir, config, *, variant, prefix, channels=1, architecture=Non
         f"# add this file to a project (Project > Add/Remove Files in Project)\n"
         f'set_global_assignment -name VERILOG_FILE [file join $::quartus(qip_path) "{prefix}.v"]\n')
     tb = write_core_testbench(out_dir / "tb", config, variant=variant, prefix=prefix, channels=channels,
-                              architecture=architecture, stages=stages, samples=samples, seed=seed, scenario=scenario)
+                              architecture=architecture, stages=stages, samples=samples, seed=seed, scenario=scenario,
+                              missing=missing, bus=bus)
+    regmap = []
+    if bus:
+        from kfpga.hw.regmap import export
+
+        regmap = [p.name for p in export(core.regs, out_dir, f"{prefix}_regs")]
     architecture = getattr(core, "architecture", architecture) or config.spec.architectures(variant, config.params)[0]
     manifest = {
         "generator": {"kfpga": __version__, "amaranth": importlib.metadata.version("amaranth")},
@@ -157,9 +206,12 @@ def write_core(out_dir, config, *, variant, prefix, channels=1, architecture=Non
         "model": _jsonable(dataclasses.asdict(config.params)),
         "formats": {name: str(f) for name, f in config.formats.items()},
         "ports": interface(config, core), "timing": timing,
-        "testbench": {k: tb[k] for k in ("samples", "seed", "scenario")},
+        "testbench": {k: tb[k] for k in ("samples", "seed", "scenario", "missing")},
+        "missing": bool(missing), "bus": bus, "bus_cost": bus_cost,
+        "registers": [{"name": r.name, "offset": r.offset, "access": r.access, "description": r.description}
+                      for r in (core.regs or [])] if bus else [],
         "files": sorted([f"{prefix}.v", f"{prefix}.qip", f"{prefix}.core", "manifest.json", "README.txt",
-                         "verilator_lint.vlt", *(f"tb/{f}" for f in tb["files"])]),
+                         "verilator_lint.vlt", *regmap, *(f"tb/{f}" for f in tb["files"])]),
     }
     (out_dir / f"{prefix}.core").write_text(_fusesoc(prefix, config, manifest, tb))
     (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
@@ -222,8 +274,47 @@ Overflow
   flags the estimate (o__payload's overflow field); the overflow port is the sticky OR since
   reset. The formats: {', '.join(f'{k} {v}' for k, v in m['formats'].items())}.
 
-Proven: the testbench in tb/ compares {m['testbench']['samples']} estimates (scenario {m['testbench']['scenario']},
-seed {m['testbench']['seed']}) word for word with the bit-accurate model.
+{_missing_text(m)}{_bus_text(m)}Proven: the testbench in tb/ compares {m['testbench']['samples']} estimates (scenario {m['testbench']['scenario']},
+seed {m['testbench']['seed']}{_tb_missing(m)}) word for word with the bit-accurate model.
+"""
+
+
+def _tb_missing(m):
+    return f", {m['testbench']['missing']} of them missing" if m.get("missing") else ""
+
+
+def _missing_text(m):
+    if not m.get("missing"):
+        return ""
+    return """Missing samples
+  A sample with i__payload's missing bit set has no measurement: its codes are not read and the
+  update only predicts (x = F x, P = F P F' + G Q G'); it still gives one estimate. A coasting
+  filter's covariance grows with each missing sample: give the covariance formats room for the
+  longest gap you expect (a saturation there is flagged like any other).
+
+"""
+
+
+def _bus_text(m):
+    if not m.get("bus"):
+        return ""
+    kind = {"avalon": "Avalon-MM slave (avs_*, word addresses, readdatavalid the cycle after a read)",
+            "axi4lite": "AXI4-Lite slave (s_axil_*, byte addresses)"}[m["bus"]]
+    rows = "\n".join(f"  0x{r['offset']:03X}  {r['name']:<16} {r['access']:<3} {r['description']}" for r in m["registers"])
+    cost = m.get("bus_cost")
+    cost_text = (f"  Cost: {cost['logic_cells']} logic cells and {cost['m4k_blocks']} M4K block(s) over the same core "
+                 f"without the bus (Yosys estimate, {cost['base_logic_cells']} -> {cost['logic_cells_with_bus']} LE).\n"
+                 if cost else "")
+    return f"""Register bus: {kind}
+  The settings (the constants of the update and the reset values) are written digit by digit
+  (kfpga regs computes them: radix 2**17, lower digits 17 bits, the top one signed 18) and take
+  effect when CONTROL.COMMIT is written: the core copies them between two updates, never inside
+  one, and COMMITTED holds the sample from which they apply. CONTROL.RESET restarts every channel
+  from the committed reset values; CONTROL.CLEAR clears the counters. The map: {m['prefix']}_regs.rdl
+  (SystemRDL), {m['prefix']}_regs.h (C), {m['prefix']}_regs.md.
+{cost_text}
+{rows}
+
 """
 
 
@@ -264,21 +355,24 @@ def core_icarus_command(prefix):
 
 
 def write_core_testbench(out_dir, config, *, variant, prefix, channels=1, architecture=None, stages=None, samples=500,
-                         seed=1, scenario=None, gaps=3):
+                         seed=1, scenario=None, gaps=3, missing=False, bus=None):
     """The self-checking testbench of the core alone in ``out_dir`` (the core's Verilog, ``PREFIX.v``,
     one folder up); returns ``{samples, seed, scenario, files}``."""
     check_prefix(prefix)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    core = figures_only(_make(config, variant, channels, architecture, stages))  # its widths and figures only
+    core = figures_only(_make(config, variant, channels, architecture, stages, missing, bus))  # its figures only
     scenario = scenario or config.spec.scenarios[0]
     order, codes = _stimulus(config, channels, samples, seed, scenario)
-    outs, overflow, _ = FixedModel(config, variant=variant).run_channels(codes, order)
+    # with the missing bit: a fifth of the samples marked (their codes not read)
+    lost = np.random.default_rng(seed + 11).random(samples) < MISSING_SHARE if missing else np.zeros(samples, bool)
+    outs, overflow, _ = FixedModel(config, variant=variant).run_channels(codes, order, missing=lost)
     i_fields, o_fields = _fields(core.i), _fields(core.o)
     iw, ow = sum(f[2] for f in i_fields), sum(f[2] for f in o_fields)
     rng = np.random.default_rng(seed + 7)
     gap = rng.integers(0, gaps + 1, samples) * (rng.random(samples) < 0.5)  # half back to back
-    stim = [(int(g) << iw) | _pack(i_fields, {"channel": c, **{n: codes[n][k] for n in config.inputs}})
+    stim = [(int(g) << iw) | _pack(i_fields, {"channel": c, "missing": int(lost[k]),
+                                              **{n: codes[n][k] for n in config.inputs}})
             for k, (c, g) in enumerate(zip(order, gap, strict=True))]
     expected = [_pack(o_fields, {"channel": c, "overflow": int(overflow[k]), **{n: outs[n][k] for n in outs}})
                 for k, c in enumerate(order)]
@@ -288,7 +382,7 @@ def write_core_testbench(out_dir, config, *, variant, prefix, channels=1, archit
     max_cycles = int((per + gaps + 2) * samples * 1024 / READY_PER_1024) + core.latency + 200 + \
         getattr(core, "startup_cycles", 0)
     tb = f"{prefix}_tb"
-    (out_dir / f"{tb}.v").write_text(_tb_verilog(prefix, iw, ow, samples, max_cycles, seed, o_fields))
+    (out_dir / f"{tb}.v").write_text(_tb_verilog(prefix, iw, ow, samples, max_cycles, seed, o_fields, _bus_ties(core)))
     compile_cmd, run_cmd = core_icarus_command(prefix)
     script = out_dir / "run_icarus.sh"
     script.write_text("#!/bin/sh\n# Icarus Verilog: compile and run the core's self-checking testbench (exit 0 = PASS)\n"
@@ -301,7 +395,8 @@ def write_core_testbench(out_dir, config, *, variant, prefix, channels=1, archit
         f"set failed [examine -radix unsigned /{tb}/failed]\n"
         f"if {{$failed != 0}} {{ quit -f -code 1 }} else {{ quit -f -code 0 }}\n")
     files = sorted(p.name for p in out_dir.iterdir() if p.is_file())
-    return {"samples": samples, "seed": seed, "scenario": scenario, "files": files, "out_width": ow, "in_width": iw}
+    return {"samples": samples, "seed": seed, "scenario": scenario, "files": files, "out_width": ow, "in_width": iw,
+            "missing": int(lost.sum())}
 
 
 #: The core's testbench, a ``str.format`` template (``{{`` and ``}}`` are Verilog's braces).
@@ -330,7 +425,7 @@ module {tb};
 
     {prefix} dut (
         .clk(clk), .rst(rst), .i__valid(i_valid), .i__ready(i_ready), .i__payload(i_payload),
-        .o__valid(o_valid), .o__ready(o_ready), .o__payload(o_payload), .overflow(overflow)
+        .o__valid(o_valid), .o__ready(o_ready), .o__payload(o_payload), .overflow(overflow){bus}
     );
 
     // {prefix}_stimulus.hex: {{idle cycles before the sample [7:0], the payload [{iw_top}:0]}}
@@ -407,7 +502,7 @@ endmodule
 """
 
 
-def _tb_verilog(prefix, iw, ow, samples, max_cycles, seed, o_fields):
+def _tb_verilog(prefix, iw, ow, samples, max_cycles, seed, o_fields, bus=""):
     tb = f"{prefix}_tb"
     show = " ".join(f"{name} %0d" for name, *_ in o_fields)
     args = ", ".join(f"{'$signed(' if s else ''}{w}[{o + n - 1}:{o}]{')' if s else ''}"
@@ -415,7 +510,7 @@ def _tb_verilog(prefix, iw, ow, samples, max_cycles, seed, o_fields):
     return _TB_VERILOG.format(prefix=prefix, tb=tb, samples=samples, max_cycles=max_cycles,
                               seed_word=(seed * 2654435761 + 1) & 0xFFFFFFFF | 1, ready_per_1024=READY_PER_1024,
                               iw_top=iw - 1, iw=iw, ow_top=ow - 1, gap_top=iw + 7,
-                              finish=finish_with_status("                "), show=show, args=args)
+                              finish=finish_with_status("                "), show=show, args=args, bus=bus)
 
 
 def fusesoc_core(*, vlnv, comments, description, rtl, top, tb, tb_top, data, filesets="", targets=""):

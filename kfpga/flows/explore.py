@@ -28,13 +28,15 @@ import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-__all__ = ["Candidate", "candidates", "choose", "FMAX_MARGIN", "MAX_STAGES"]
+__all__ = ["Candidate", "candidates", "choose", "bus_cost", "FMAX_MARGIN", "MAX_STAGES", "BUS_GOAL_LOGIC_CELLS"]
 
 #: The estimate must beat the clock by this factor: it is an estimate (FloPoCo's delays, no
 #: place and route), and Quartus's router adds what the estimate cannot see.
 FMAX_MARGIN = 1.25
 #: Pipeline stages tried at most.
 MAX_STAGES = 8
+#: The register bus's goal: logic cells over the same folded core without it.
+BUS_GOAL_LOGIC_CELLS = 150
 
 
 @dataclass
@@ -129,16 +131,20 @@ def _estimate(core, name):
     return keep
 
 
-def _designs(config, variant, channels):
-    """``[(architecture, stages, core)]``: every design of ``variant`` with ``channels`` states."""
+def _designs(config, variant, channels, missing=False, bus=None):
+    """``[(architecture, stages, core)]``: every design of ``variant`` with ``channels`` states (with
+    ``missing`` or ``bus``, the folded core's alone: the parallel cores have neither)."""
     from kfpga.hw.generate import figures_only
 
     spec = config.spec
     out = []
+    options = {**({"missing": True} if missing else {}), **({"bus": bus} if bus else {})}
     for architecture in spec.architectures(variant, config.params):
         if architecture == "folded":
             out.append((architecture, None, figures_only(spec.make_core(config, variant, channels=channels,
-                                                                        architecture=architecture))))
+                                                                        architecture=architecture, **options))))
+            continue
+        if options:
             continue
         try:
             default = figures_only(spec.make_core(config, variant, channels=channels, architecture=architecture))
@@ -156,10 +162,11 @@ def _designs(config, variant, channels):
     return out
 
 
-def candidates(config, variant, *, channels=1, clock_hz=50e6, need_hz, progress=None):
-    """Every design with its figures; ``need_hz`` updates a second over all channels together."""
+def candidates(config, variant, *, channels=1, clock_hz=50e6, need_hz, progress=None, missing=False, bus=None):
+    """Every design with its figures; ``need_hz`` updates a second over all channels together
+    (``missing``, ``bus``: the folded core with them)."""
     out = []
-    designs = _designs(config, variant, channels)
+    designs = _designs(config, variant, channels, missing, bus)
     for i, (architecture, stages, core) in enumerate(designs):
         if progress:
             progress(i, len(designs), architecture + ("" if stages is None else f", {stages} stages"))
@@ -186,3 +193,20 @@ def choose(found):
     best = min(ok, key=cost)
     best.chosen = True
     return best
+
+
+def bus_cost(config, variant, *, channels=1, missing=False, bus):
+    """What the register bus ``bus`` costs the folded core: its figures with and without it (the
+    programmable settings and the slave together), against :data:`BUS_GOAL_LOGIC_CELLS`."""
+    from kfpga.hw.generate import figures_only
+
+    spec = config.spec
+    plain = figures_only(spec.make_core(config, variant, channels=channels, architecture="folded", missing=missing))
+    with_bus = figures_only(spec.make_core(config, variant, channels=channels, architecture="folded",
+                                           missing=missing, bus=bus))
+    a, b = _estimate(plain, "kfpga_core"), _estimate(with_bus, "kfpga_core")
+    return {"bus": bus, "logic_cells": b["logic_cells"] - a["logic_cells"],
+            "m4k_blocks": b["m4k_blocks"] - a["m4k_blocks"], "base_logic_cells": a["logic_cells"],
+            "logic_cells_with_bus": b["logic_cells"], "fmax_mhz_estimate": b["fmax_mhz_estimate"],
+            "worst_path": b["worst_path"], "goal_logic_cells": BUS_GOAL_LOGIC_CELLS,
+            "within_goal": b["logic_cells"] - a["logic_cells"] <= BUS_GOAL_LOGIC_CELLS}
