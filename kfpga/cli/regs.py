@@ -110,7 +110,7 @@ def _table(config, args, values, writes):
     for sv in values:
         st = sv.setting
         digits = " ".join(f"0x{d & 0x3FFFF:05X}" for d in sv.digits)
-        lines.append(f"  {st.label:<22}{sv.value:>14.6g}{sv.held:>14.6g}{sv.raw:>12}  {str(st.fmt):<9} {digits}")
+        lines.append(f"  {st.label:<22}{sv.value:>14.6g}{sv.held:>14.6g}{sv.raw:>12}  {st.fmt!s:<9} {digits}")
     lines.append(f"  bus writes ({len(writes)}; word index, byte offset, value):")
     lines += [f"    {index:>4}  0x{4 * index:04X}  0x{value:08X}  {name}" for index, value, name in writes]
     return "\n".join(lines) + "\n"

@@ -274,13 +274,14 @@ Overflow
   flags the estimate (o__payload's overflow field); the overflow port is the sticky OR since
   reset. The formats: {', '.join(f'{k} {v}' for k, v in m['formats'].items())}.
 
-{_missing_text(m)}{_bus_text(m)}Proven: the testbench in tb/ compares {m['testbench']['samples']} estimates (scenario {m['testbench']['scenario']},
-seed {m['testbench']['seed']}{_tb_missing(m)}) word for word with the bit-accurate model.
-"""
+{_missing_text(m)}{_bus_text(m)}{_proven(m)}"""
 
 
-def _tb_missing(m):
-    return f", {m['testbench']['missing']} of them missing" if m.get("missing") else ""
+def _proven(m):
+    tb = m["testbench"]
+    lost = f", {tb['missing']} of them missing" if m.get("missing") else ""
+    return (f"Proven: the testbench in tb/ compares {tb['samples']} estimates (scenario {tb['scenario']},\n"
+            f"seed {tb['seed']}{lost}) word for word with the bit-accurate model.\n")
 
 
 def _missing_text(m):
