@@ -42,14 +42,15 @@ def program_for(config, variant, *, missing=False):
 def new_config(config, variant, params):
     """``config`` with new ``params`` in the core's formats; :class:`ConfigError` when the new model
     does not have the core's shape (a structural constant, a shift or a zero entry, differs)."""
-    try:
-        new = config.replace(params=params, formats=config.formats)
-    except (ValueError, TypeError) as exc:
-        raise ConfigError(f"the new parameters do not fit the core's formats: {exc}") from None
-    why = new.spec.variants[variant].applies(new.params)
+    spec_variant = config.spec.variants[variant]
+    why = spec_variant.applies(params)
     if why:
         raise ConfigError(why)
-    old_c, new_c = config.constants(variant), new.constants(variant)
+    try:
+        new_c = spec_variant.constants(params)
+    except (ValueError, TypeError, ArithmeticError) as exc:
+        raise ConfigError(f"the new parameters: {exc}") from None
+    old_c = config.constants(variant)
     if set(old_c) != set(new_c):
         gone, added = sorted(set(old_c) - set(new_c)), sorted(set(new_c) - set(old_c))
         what = "; ".join(x for x in (f"no longer has {', '.join(gone)}" if gone else "",
@@ -67,9 +68,12 @@ def new_config(config, variant, params):
             label = c.label if isinstance(c, Constant) and c.label else name
             raise ConfigError(f"{label} is built into the core (a shift, an exact constant or the model's "
                               "structure) and the new parameters change it; generate a core for them")
-    if programmable_names(new, variant)[1] != programmable_names(config, variant)[1]:
+    if [n for n, _ in spec_variant.state_for(params)] != [n for n, _ in spec_variant.state_for(config.params)]:
         raise ConfigError("the new model has other states than the core's")
-    return new
+    try:
+        return config.replace(params=params, formats=config.formats)
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(f"the new parameters do not fit the core's formats: {exc}") from None
 
 
 def settings_for(config, variant, params, *, program=None):
