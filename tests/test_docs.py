@@ -76,18 +76,20 @@ def test_readme_example_is_the_manuals_and_runs(tmp_path, monkeypatch, capsys):
     assert tomllib.loads(_block(section, "toml")) == tomllib.loads(_block(manual, "toml"))
     shown = _commands(_block(manual, "sh"))
     ours = _commands(_block(section, "sh"))
-    assert [c.split()[1] for c in ours] == ["compare", "generate", "simulate", "generate"]
+    assert [c.split()[1] for c in ours] == ["compare", "generate", "simulate", "generate", "generate", "regs"]
+    here = [c for c in ours if "--core-only" in c or c.split()[1] == "regs"]  # the core alone and its bus
     for command in ours:
-        if "--core-only" in command:
+        if command in here:
             continue
         assert any(other.startswith(command.split(" --plot")[0].split(" --samples")[0]) for other in shown), command
     monkeypatch.chdir(tmp_path)
     Path("tracker.toml").write_text(_block(section, "toml"))
-    core_only = next(shlex.split(c) for c in ours if "--core-only" in c)
-    assert main([*core_only[1:], "--quiet"]) == 0
+    for command in here:
+        argv = shlex.split(command)[1:]
+        assert main([*argv, "--quiet"] if argv[0] == "generate" else argv) == 0, command
     capsys.readouterr()
-    manifest = json.loads(Path("build/core/manifest.json").read_text())
-    assert manifest
+    assert json.loads(Path("build/core/manifest.json").read_text())
+    assert json.loads(Path("build/bus/manifest.json").read_text())["bus"] == "avalon"
 
 
 def test_api_example_runs(tmp_path, monkeypatch, capsys):
@@ -98,3 +100,18 @@ def test_api_example_runs(tmp_path, monkeypatch, capsys):
     exec(compile(code, "docs/api.md", "exec"), namespace)  # the manual's own example
     assert namespace["core"].latency >= 1
     assert "[" in capsys.readouterr().out
+
+
+def test_the_manuals_register_map_is_the_generated_one():
+    """docs/programmable.md's table of the paper's filter's map: every row as hw/regmap.py makes it."""
+    from kfpga.core.config import FilterConfig
+    from kfpga.flows.regs import program_for
+    from kfpga.hw.regmap import register_map
+
+    page = (Path(__file__).parents[1] / "docs" / "programmable.md").read_text()
+    block = page.split("<!-- register-map: kalman2 steady", 1)[1].split("<!-- end register-map -->", 1)[0]
+    rows = [line for line in block.splitlines() if line.startswith("| `0x")]
+    config = FilterConfig()
+    want = [f"| `0x{r.offset:03X}` | `{r.name}` | {r.access} | {r.description} |"
+            for r in register_map(program_for(config, "steady", missing=True), config, "steady")]
+    assert rows == want
