@@ -395,18 +395,22 @@ class _Build:
         self.outputs()
         self.initializing = initializing = Signal(init=1, name="initializing")
         self.commit_pending, self.reset_pending = Signal(name="commit_pending"), Signal(name="reset_pending")
-        self.committing = Signal(name="committing")
+        self.clear_pending = Signal(name="clear_pending")
+        self.committing = Signal(name="committing")  # the commit routine, or the counters' clear, runs
         free = ~core.o.valid | core.o.ready  # no estimate waits, or it is taken now
         last_digit = self.load == len(p.sample_addrs) - 1
         idle = ~self.running
         # a commit or a reset waits for the end of the update that runs, and holds the next sample
-        held = (self.commit_pending | self.reset_pending) if bus else Const(0, 1)
+        held = (self.commit_pending | self.reset_pending | self.clear_pending) if bus else Const(0, 1)
         # ready does not follow valid within a cycle: it is high once the other digits are written
         m.d.comb += core.i.ready.eq(idle & free & last_digit & ~held)
         self.start_commit, self.start_reset = Signal(name="start_commit"), Signal(name="start_reset")
-        if bus:
+        self.start_clear = Signal(name="start_clear")
+        if bus:  # at an update's end: the commit first, then the counters' clear, then the reset
             m.d.comb += [self.start_commit.eq(idle & self.commit_pending),
-                         self.start_reset.eq(idle & ~self.commit_pending & self.reset_pending & free)]
+                         self.start_clear.eq(idle & ~self.commit_pending & self.clear_pending),
+                         self.start_reset.eq(idle & ~self.commit_pending & ~self.clear_pending & self.reset_pending
+                                             & free)]
         self.take = take = Signal(name="take")
         coast = core.i.payload.missing if core.missing else Const(0, 1)
         # plain assignments (Verilog `assign`), not outputs of case statements: no simulator can leave
@@ -416,7 +420,8 @@ class _Build:
         if core.missing:
             idle_pc = Mux(take & coast, p.start("predict"), idle_pc)
         if bus:
-            idle_pc = Mux(self.start_commit, p.start("commit"), Mux(self.start_reset, 0, idle_pc))
+            idle_pc = Mux(self.start_commit, p.start("commit"),
+                          Mux(self.start_clear, p.start("clear"), Mux(self.start_reset, 0, idle_pc)))
         m.d.comb += [self.sample_write.eq(idle & core.i.valid & free & ~held),
                      take.eq(self.sample_write & last_digit),
                      self.pc_next.eq(Mux(self.issue, Mux(self.back, self.word["d"], self.pc + 1),
@@ -429,14 +434,16 @@ class _Build:
         with m.Elif(idle):
             m.d.sync += self.load.eq(0)
         if bus:
-            with m.If(self.start_commit):
+            with m.If(self.start_commit | self.start_clear):
                 m.d.sync += [self.running.eq(1), self.committing.eq(1)]
             with m.If(self.start_reset):
                 m.d.sync += [self.running.eq(1), initializing.eq(1), self.channel.eq(0), self.reset_pending.eq(0)]
         with m.If(self.finished):  # the last step's write is in this cycle
             m.d.sync += self.ending.eq(0)
-            with m.If(self.committing):
+            with m.If(self.committing):  # the commit, or (none pending) the clear
                 m.d.sync += [self.committing.eq(0), self.running.eq(0), self.commit_pending.eq(0)]
+                with m.If(~self.commit_pending):
+                    m.d.sync += self.clear_pending.eq(0)
             with m.Elif(~initializing):
                 m.d.sync += [core.o.valid.eq(1), self.running.eq(0)]
             with m.Elif(~restart):  # every channel's reset state written
@@ -464,33 +471,86 @@ class _Build:
                      self.wr_en.eq(self.sample_write | self.step_write | (self.bus_write if bus else 0))]
 
     def registers(self):
-        """The bus slave: the fixed registers and the settings' shadow words (``hw/regmap.py``),
-        behind Avalon-MM or AXI4-Lite. A setting's digit goes into the register file in a cycle
-        nothing else writes it; a write waits (``waitrequest``, no ``awready``) while the port is
-        taken or a commit is pending. Reads answer the next cycle."""
-        from kfpga.hw.regmap import CONTROL_BITS, COUNT_BITS, SETTINGS_BASE, VERSION, identity
+        """The bus slave: the fixed registers, the settings' shadow words and the overflow counters
+        (``hw/regmap.py``), behind Avalon-MM or AXI4-Lite. A setting's digit goes into the register
+        file in a cycle nothing else writes it; a write waits (``waitrequest``, no ``awready``)
+        while the port is taken or a commit is pending. A read answers the next cycle; a counter's
+        (a word of the register file) the cycle after, once no routine runs."""
+        from kfpga.hw.regmap import counters_base
 
         m, core, p = self.m, self.core, self.p
-        n = p.shadow_words
         abits = core.bus_address_bits
-        addr, wdata = Signal(abits, name="reg_addr"), Signal(32, name="reg_wdata")
-        offer, write, read = Signal(name="reg_offer"), Signal(name="reg_write"), Signal(name="reg_read")
-        stall, rdata = Signal(name="reg_stall"), Signal(32, name="reg_rdata", reset_less=True)
+        # a write's address and a read's apart: no multiplexer between them on either path
+        r = {"addr": Signal(abits, name="reg_raddr"), "waddr": Signal(abits, name="reg_waddr"),
+             "wdata": Signal(32, name="reg_wdata"),
+             "offer": Signal(name="reg_offer"), "roffer": Signal(name="reg_roffer"), "write": Signal(name="reg_write"),
+             "read": Signal(name="reg_read"), "stall": Signal(name="reg_stall"), "rstall": Signal(name="reg_rstall"),
+             "rdata": Signal(32, name="reg_rdata", reset_less=True), "done": Signal(name="reg_done")}
+        self.reg_port = r
+        base = counters_base(p)
+        is_counter = (r["addr"] >= base) & (r["addr"] < base + len(p.counters))
+        # a counter is read through the register file's first port: not while a routine runs, and one
+        # read at a time
+        # (its address registered first: the port's address path is the core's longest), one read at
+        # a time, and not when a routine runs in the next cycle
+        want, in_flight = Signal(name="counter_want"), Signal(name="counter_read")
+        counter_addr = Signal(self.abits, name="counter_addr", reset_less=True)
+        starting = self.take | self.start_commit | self.start_clear | self.start_reset
+        m.d.comb += [r["rstall"].eq(r["roffer"] & ((is_counter & (self.running | starting)) | want | in_flight)),
+                     r["read"].eq(r["roffer"] & ~r["rstall"])]
+        self.settings_port(r)
+        value = self.fixed_registers(r)
+        with m.If(want):
+            m.d.comb += self.reads[1].addr.eq(counter_addr)
+        m.d.sync += [want.eq(r["read"] & is_counter), in_flight.eq(want), counter_addr.eq(r["addr"] + (p.counter_base - base)),
+                     r["done"].eq((r["read"] & ~is_counter) | in_flight)]
+        with m.If(r["read"] & ~is_counter):
+            m.d.sync += r["rdata"].eq(value)
+        with m.If(in_flight):  # a counter's word (its low digit: 17 bits)
+            m.d.sync += r["rdata"].eq(self.reads[1].data[:DIGIT])
+        (self.avalon if core.bus == "avalon" else self.axi4lite)()
+
+    def settings_port(self, r):
+        """A setting's digit from the bus to its shadow word."""
+        from kfpga.hw.regmap import SETTINGS_BASE
+
+        m, p = self.m, self.p
+        n = p.shadow_words
+        addr = r["waddr"]
         is_setting = (addr >= SETTINGS_BASE) & (addr < SETTINGS_BASE + n)
         # a setting's write waits while the register file's write port is taken or a commit is pending
-        m.d.comb += [stall.eq(offer & is_setting & (self.port_busy | self.commit_pending)), write.eq(offer & ~stall)]
+        m.d.comb += [r["stall"].eq(r["offer"] & is_setting & (self.port_busy | self.commit_pending)),
+                     r["write"].eq(r["offer"] & ~r["stall"])]
         # a lower digit keeps 17 bits (the word's top bit 0), the top digit of each setting 18
         tops = sum(1 << (SETTINGS_BASE + st.shadow + st.digits - 1) for st in p.settings)
         top_digit = Const(tops, SETTINGS_BASE + max(n, 1)).bit_select(addr, 1)
-        m.d.comb += [self.bus_write.eq(write & is_setting),
+        m.d.comb += [self.bus_write.eq(r["offer"] & is_setting & ~r["stall"]),
                      self.bus_addr.eq(addr + (p.shadow_base - SETTINGS_BASE)),
-                     self.bus_data.eq(Cat(wdata[:DIGIT], wdata[DIGIT] & top_digit))]
-        # the counters
+                     self.bus_data.eq(Cat(r["wdata"][:DIGIT], r["wdata"][DIGIT] & top_digit))]
+
+    def fixed_registers(self, r):
+        """``CONTROL``'s actions, the counters in logic, and the value a read of a fixed register gives."""
+        from kfpga.hw.regmap import (
+            COMMITTED,
+            CONTROL,
+            CONTROL_BITS,
+            COUNT_BITS,
+            ID,
+            INFO,
+            OVERFLOWS,
+            STATUS,
+            UPDATES,
+            VERSION,
+            identity,
+        )
+
+        m, core, p = self.m, self.core, self.p
         updates, overflows, committed = (Signal(COUNT_BITS, name=f"reg_{x}") for x in ("updates", "overflows", "committed"))
         ovf_seen = Signal(name="reg_overflow")
-        clear = write & (addr == 2) & wdata[CONTROL_BITS["CLEAR"]]
-        with m.If(clear):
-            m.d.sync += [updates.eq(0), overflows.eq(0), committed.eq(0), ovf_seen.eq(0)]
+        control = r["offer"] & (r["waddr"] == CONTROL)  # never held: only a setting's write waits
+        wdata = r["wdata"]
+        with m.If(control & wdata[CONTROL_BITS["CLEAR"]]):
+            m.d.sync += [updates.eq(0), overflows.eq(0), committed.eq(0), ovf_seen.eq(0), self.clear_pending.eq(1)]
         with m.Else():
             with m.If(self.take):
                 m.d.sync += updates.eq(updates + 1)
@@ -500,58 +560,51 @@ class _Build:
                     m.d.sync += overflows.eq(overflows + 1)
             with m.If(self.start_commit):
                 m.d.sync += committed.eq(updates)
-        with m.If(write & (addr == 2)):
-            with m.If(wdata[CONTROL_BITS["COMMIT"]]):
-                m.d.sync += self.commit_pending.eq(1)
-            with m.If(wdata[CONTROL_BITS["RESET"]]):
-                m.d.sync += self.reset_pending.eq(1)
-        info = VERSION | (core.channels - 1) << 8 | n << 16
-        pending = Cat(self.commit_pending, self.reset_pending)
-        status = Cat(self.commit_pending, self.reset_pending, ovf_seen, self.running)
+        with m.If(control & wdata[CONTROL_BITS["COMMIT"]]):
+            m.d.sync += self.commit_pending.eq(1)
+        with m.If(control & wdata[CONTROL_BITS["RESET"]]):
+            m.d.sync += self.reset_pending.eq(1)
+        info = VERSION | (core.channels - 1) << 8 | p.shadow_words << 16
+        pending = Cat(self.commit_pending, self.reset_pending, self.clear_pending)
+        status = Cat(self.commit_pending, self.reset_pending, ovf_seen, self.running, self.clear_pending)
         value = Const(0, 32)
-        for j, reg in ((0, Const(identity(core.config, core.variant), 32)), (1, Const(info, 32)), (2, pending),
-                       (3, status), (4, updates), (5, overflows), (6, committed)):
-            value = Mux(addr == j, reg, value)
-        with m.If(read):
-            m.d.sync += rdata.eq(value)
-        self.reg_port = {"addr": addr, "wdata": wdata, "offer": offer, "write": write, "read": read, "stall": stall, "rdata": rdata,
-                         "updates": updates, "committed": committed}
-        (self.avalon if core.bus == "avalon" else self.axi4lite)()
+        for j, reg in ((ID, Const(identity(core.config, core.variant), 32)), (INFO, Const(info, 32)),
+                       (CONTROL, pending), (STATUS, status), (UPDATES, updates), (OVERFLOWS, overflows),
+                       (COMMITTED, committed)):
+            value = Mux(r["addr"] == j, reg, value)
+        return value
 
     def avalon(self):
-        """Avalon-MM: word addresses, ``waitrequest`` for a setting's write that must wait, the read
-        data and ``readdatavalid`` the cycle after the read."""
+        """Avalon-MM: word addresses, ``waitrequest`` for an access that must wait, the read data
+        with ``readdatavalid`` (the cycle after the read, a counter's one later)."""
         m, core, r = self.m, self.core, self.reg_port
-        valid = Signal(name="avs_valid")
-        m.d.comb += [r["addr"].eq(core.avs_address), r["wdata"].eq(core.avs_writedata),
-                     r["offer"].eq(core.avs_write), r["read"].eq(core.avs_read),
-                     core.avs_waitrequest.eq(r["stall"]), core.avs_readdata.eq(r["rdata"]),
-                     core.avs_readdatavalid.eq(valid)]
-        m.d.sync += valid.eq(core.avs_read)
+        m.d.comb += [r["addr"].eq(core.avs_address), r["waddr"].eq(core.avs_address), r["wdata"].eq(core.avs_writedata),
+                     r["offer"].eq(core.avs_write), r["roffer"].eq(core.avs_read),
+                     core.avs_waitrequest.eq(r["stall"] | r["rstall"]), core.avs_readdata.eq(r["rdata"]),
+                     core.avs_readdatavalid.eq(r["done"])]
 
     def axi4lite(self):
         """AXI4-Lite: byte addresses; a write takes its address and data together (``awready`` and
-        ``wready`` in one cycle), answered with ``bvalid`` (OKAY); a read with ``rvalid`` the cycle
-        after it is taken (OKAY)."""
+        ``wready`` in one cycle), answered with ``bvalid`` (OKAY); a read with ``rvalid`` once its
+        data is in (OKAY), held until taken."""
         m, core, r = self.m, self.core, self.reg_port
-        bvalid, rvalid = Signal(name="axil_bvalid"), Signal(name="axil_rvalid")
+        bvalid, rvalid, busy = Signal(name="axil_bvalid"), Signal(name="axil_rvalid"), Signal(name="axil_reading")
         offered = core.s_axil_awvalid & core.s_axil_wvalid & ~bvalid
-        take_read = core.s_axil_arvalid & ~rvalid
-        # the address of the write offered, else of the read
-        m.d.comb += [r["addr"].eq(Mux(offered, core.s_axil_awaddr[2:], core.s_axil_araddr[2:])),
-                     r["wdata"].eq(core.s_axil_wdata)]
-        accept = r["write"]
-        m.d.comb += [r["offer"].eq(offered), r["read"].eq(take_read & ~offered),
-                     core.s_axil_awready.eq(accept), core.s_axil_wready.eq(accept),
-                     core.s_axil_arready.eq(take_read & ~offered),
+        m.d.comb += [r["waddr"].eq(core.s_axil_awaddr[2:]), r["addr"].eq(core.s_axil_araddr[2:]),
+                     r["wdata"].eq(core.s_axil_wdata), r["offer"].eq(offered),
+                     r["roffer"].eq(core.s_axil_arvalid & ~rvalid & ~busy & ~offered),
+                     core.s_axil_awready.eq(r["write"]), core.s_axil_wready.eq(r["write"]),
+                     core.s_axil_arready.eq(r["read"]),
                      core.s_axil_bvalid.eq(bvalid), core.s_axil_bresp.eq(0),
                      core.s_axil_rvalid.eq(rvalid), core.s_axil_rresp.eq(0), core.s_axil_rdata.eq(r["rdata"])]
-        with m.If(accept):
+        with m.If(r["write"]):
             m.d.sync += bvalid.eq(1)
         with m.Elif(core.s_axil_bready):
             m.d.sync += bvalid.eq(0)
-        with m.If(take_read & ~offered):
-            m.d.sync += rvalid.eq(1)
+        with m.If(r["read"]):
+            m.d.sync += busy.eq(1)
+        with m.If(r["done"]):
+            m.d.sync += [busy.eq(0), rvalid.eq(1)]
         with m.Elif(core.s_axil_rready):
             m.d.sync += rvalid.eq(0)
 

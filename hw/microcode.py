@@ -294,6 +294,7 @@ class _Lowering:
     def __init__(self, nodes, state_names, sample_names, input_digits, tag="t"):
         self.nodes = nodes
         self.tag = tag  # the temporaries' address tag: each routine has its own
+        self.counted = []  # the points whose overflows the routine counts
         self.code = []
         self.vals = {}
         self.temps = 0  # temporary digits made so far (each its own address: "t", id, k)
@@ -759,6 +760,9 @@ class Program:
     #: the :class:`Setting` s a bus writes (a programmable program), and the first shadow word's address
     settings: tuple = ()
     shadow_base: int = 0
+    #: the points whose overflows the counters count (a programmable program), and the first one's address
+    counters: tuple = ()
+    counter_base: int = 0
 
     def start(self, routine):
         """The first word of ``routine``."""
@@ -801,7 +805,7 @@ def _trace(config, variant, *, predict=False, programmable=()):
     for label, value in [*outs.items(), *x_next.items()]:
         if not isinstance(value, Fx):
             raise TypeError(f"{label}: the update must give Fx values")
-    return ops.nodes, states, x_next, outs
+    return ops.nodes, states, x_next, outs, dict(ops.point_of)
 
 
 def _live(nodes, roots):
@@ -815,10 +819,12 @@ def _live(nodes, roots):
     return live
 
 
-def _routine(config, variant, tag, *, predict=False, programmable=()):
+def _routine(config, variant, tag, *, predict=False, programmable=(), counting=False):
     """One sample's routine (the update, or with ``predict`` the update of a sample with no
-    measurement): ``(lowering, output chunks, {state: digits})``; its temporaries are tagged ``tag``."""
-    nodes, states, x_next, outs = _trace(config, variant, predict=predict, programmable=programmable)
+    measurement): ``(lowering, output chunks, {state: digits})``; its temporaries are tagged ``tag``;
+    with ``counting``, every write that can overflow also counts its overflows in a register-file
+    word of its point (``("o", point)``)."""
+    nodes, states, x_next, outs, point_of = _trace(config, variant, predict=predict, programmable=programmable)
     state_names = [name for name, _ in states]
     input_digits = digits_for(config.input_format.min_raw, config.input_format.max_raw)
     low = _Lowering(nodes, state_names, list(config.inputs), input_digits, tag)
@@ -827,7 +833,12 @@ def _routine(config, variant, tag, *, predict=False, programmable=()):
     live = _live(nodes, roots)
     for i in range(len(nodes)):
         if i in live or nodes[i].op in ("const", "input"):
+            start = len(low.code)
             low.lower(i)
+            if counting and nodes[i].overflow:
+                point = point_of.get(nodes[i].name, nodes[i].name)
+                low.code[start:] = _count_overflows(low.code[start:], point)
+                low.counted.append(point)
     # the outputs, chunk by chunk
     chunks = []
     for name in output_fields:
@@ -853,6 +864,35 @@ def _routine(config, variant, tag, *, predict=False, programmable=()):
     for name, (v, n) in final.items():
         low.linear([(v, 1, 0)], n, _Val(tuple(("s", name, j) for j in range(n))))
     return low, chunks, {name: final[name][1] for name in state_names}
+
+
+def _count_overflows(code, point):
+    """``code`` (one write's steps) with, after each capture of its overflow flag, two steps that
+    add the flag to the counter word ``("o", point)`` (its low digit: it wraps at 2**17). A capture
+    ORed into the flag by the next step counts once, after that step; the accumulator is free
+    there (the next step clears it)."""
+    out, depth = [], 0
+    counter = ("o", point)
+    for j, mac in enumerate(code):
+        out.append(mac)
+        depth += (mac.loop == BEGIN) - (mac.loop == END)
+        if not (mac.ovf and mac.cap) or _ored_later(code, j):
+            continue
+        nxt = code[j + 1] if j + 1 < len(code) else None
+        if depth or (nxt is not None and nxt.acc != CLEAR):
+            raise AssertionError("an overflow capture inside a loop, or before a step that keeps the accumulator")
+        out += [Mac(counter, ONE, CLEAR), Mac(ZERO, ONE, KEEP, a2=ONE, pred=mac.flag, wr=LO, d=counter)]
+    return out
+
+
+def _ored_later(code, j):
+    """Whether a later step ORs another overflow condition into the flag step ``j`` captures
+    (before any step captures that flag anew)."""
+    flag = code[j].flag
+    for mac in code[j + 1:]:
+        if mac.cap and mac.flag == flag:
+            return mac.cap == OR and mac.ovf
+    return False
 
 
 @dataclass(frozen=True)
@@ -884,11 +924,12 @@ def compile_update(config, variant, *, channels=1, channel_bits=None, predict=Fa
         raise ValueError(f"the {config.spec.name} filter's {variant} variant takes every sample as a measurement: "
                          "no update without one (missing samples do not apply)")
     consts, resets = programmable_names(config, variant) if programmable else ((), ())
-    low, chunks, state_digits = _routine(config, variant, "t", programmable=consts)
+    low, chunks, state_digits = _routine(config, variant, "t", programmable=consts, counting=programmable)
     routines = {"update": low.code}
     lows = [low]
     if predict:
-        coast, coast_chunks, _ = _routine(config, variant, "tp", predict=True, programmable=consts)
+        coast, coast_chunks, _ = _routine(config, variant, "tp", predict=True, programmable=consts,
+                                          counting=programmable)
         if coast_chunks != chunks:
             raise AssertionError("the routines without a measurement give other output chunks")
         routines["predict"] = coast.code
@@ -918,11 +959,15 @@ def compile_update(config, variant, *, channels=1, channel_bits=None, predict=Fa
         # the commit: every shadow word copied to the word the routines read
         routines["commit"] = [Mac(("p", st.shadow + dgt), ONE, CLEAR, wr=HI, d=(st.kind, st.name, dgt))
                               for st in settings for dgt in range(st.digits)] or [nop()]
+    counters = tuple(dict.fromkeys(p for lw in lows for p in lw.counted))
+    if programmable:  # the counters to 0
+        routines["clear"] = [Mac(ZERO, ZERO, CLEAR, wr=LO, d=("o", point)) for point in counters] or [nop()]
     return _place(config, init_code, routines, lows, state_digits, chunks, channels, channel_bits,
-                  digits_for(config.input_format.min_raw, config.input_format.max_raw), settings)
+                  digits_for(config.input_format.min_raw, config.input_format.max_raw), settings, counters)
 
 
-def _place(config, init_code, routines, lows, state_digits, chunks, channels, channel_bits, input_digits, settings):
+def _place(config, init_code, routines, lows, state_digits, chunks, channels, channel_bits, input_digits, settings,
+           counters=()):
     """Addresses for every word, the schedule's waits, the register file's power-up words."""
     parts = [("init", init_code), *routines.items()]
     code = [mac for _, part in parts for mac in part]
@@ -931,7 +976,10 @@ def _place(config, init_code, routines, lows, state_digits, chunks, channels, ch
     samples = [(name, dgt) for name in config.inputs for dgt in range(input_digits)]
     for j, (name, dgt) in enumerate(samples):
         addr[("u", name, dgt)] = len(consts) + j
-    image, shadow_base, temp_base = _place_settings(addr, settings, len(consts) + len(samples))
+    counter_base = len(consts) + len(samples)
+    for j, point in enumerate(counters):  # the overflow counters, 0 at power-up
+        addr[("o", point)] = counter_base + j
+    image, shadow_base, temp_base = _place_settings(addr, settings, counter_base + len(counters))
     for tag, part in (("t", routines["update"]), ("tp", routines.get("predict", []))):
         addr.update(_allocate(part, temp_base, tag))  # the routines never run at once: the same registers
     top = max([*addr.values(), 0]) + 1
@@ -960,7 +1008,7 @@ def _place(config, init_code, routines, lows, state_digits, chunks, channels, ch
                    [(name, dgt, addr[("u", name, dgt)]) for name, dgt in samples], chunks, acc_bits, depth, channels,
                    cycles["update"], cycles["init"], tuple(o.name for o in config.outputs), input_digits,
                    {v: addr[("k", v)] for v in consts}, addr, {i: v.addrs for i, v in lows[0].vals.items()},
-                   lows[0].nodes, starts, cycles, tuple(settings), shadow_base)
+                   lows[0].nodes, starts, cycles, tuple(settings), shadow_base, counters, counter_base)
 
 
 def _place_settings(addr, settings, nxt):
@@ -1040,7 +1088,8 @@ def handshake_twin(program):
                                sample_addrs=samples, update_cycles=_cycles(update), init_cycles=_cycles(init),
                                depth=depth, consts=consts, addresses={}, values={}, nodes=[],
                                routines={"init": (0, 1), "update": (1, 3)},
-                               cycles={"init": _cycles(init), "update": _cycles(update)}, settings=(), shadow_base=0)
+                               cycles={"init": _cycles(init), "update": _cycles(update)}, settings=(), shadow_base=0,
+                               counters=(), counter_base=0)
 
 
 def _resolve(mac, addr):
@@ -1215,14 +1264,15 @@ def _run(p, regs, words, ch, out_bits):
     return ovf
 
 
-def execute(program, samples, channels, *, missing=None, settings=None):
+def execute(program, samples, channels, *, missing=None, settings=None, registers=None):
     """Run ``program`` as the core does: every step reads the register file and the flags as they
     are at its issue (a word written ``READ_LATENCY`` cycles before, a flag ``FLAG_LATENCY``), so
     that a schedule that broke the pipeline's rules gives other integers. ``samples``: one
     ``{input: code}`` per update; ``channels``: the channel number of each; ``missing``: true
     where a sample has no measurement (the predict routine runs); ``settings``: ``{sample index:
     {shadow word: digit}}``, written to the shadow words and committed before that sample (a
-    programmable program). Returns ``([{output: raw}], [overflow])``."""
+    programmable program); ``registers``: a list given the register file's words at the end (the
+    overflow counters are at ``counter_base``). Returns ``([{output: raw}], [overflow])``."""
     p = program
     mask, sign = (1 << WORD) - 1, 1 << (WORD - 1)
     regs = [((v & mask) ^ sign) - sign for v in p.init]
@@ -1250,4 +1300,6 @@ def execute(program, samples, channels, *, missing=None, settings=None):
             result[name] = raw - (((raw >> (width - 1)) & 1) << width)
         outs.append(result)
         flags.append(bool(ovf))
+    if registers is not None:
+        registers[:] = regs
     return outs, flags

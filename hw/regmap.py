@@ -24,8 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = ["Register", "register_map", "identity", "identity_text", "systemrdl", "export", "SETTINGS_BASE",
-           "VERSION", "COUNT_BITS", "CONTROL_BITS", "STATUS_BITS", "ID", "INFO", "CONTROL", "STATUS", "UPDATES", "OVERFLOWS",
-           "COMMITTED"]
+           "VERSION", "COUNT_BITS", "COUNTER_BITS", "counters_base", "CONTROL_BITS", "STATUS_BITS", "ID", "INFO",
+           "CONTROL", "STATUS", "UPDATES", "OVERFLOWS", "COMMITTED"]
 
 #: The map's version, in ``INFO``.
 VERSION = 1
@@ -39,7 +39,14 @@ ID, INFO, CONTROL, STATUS, UPDATES, OVERFLOWS, COMMITTED = range(7)
 #: ``CONTROL``'s bits (write 1 to act; a read gives the commit and reset still pending).
 CONTROL_BITS = {"COMMIT": 0, "RESET": 1, "CLEAR": 2}
 #: ``STATUS``'s bits.
-STATUS_BITS = {"COMMIT_PENDING": 0, "RESET_PENDING": 1, "OVERFLOW": 2, "RUNNING": 3}
+STATUS_BITS = {"COMMIT_PENDING": 0, "RESET_PENDING": 1, "OVERFLOW": 2, "RUNNING": 3, "CLEAR_PENDING": 4}
+#: Bits of an overflow counter (a register-file word's low digit).
+COUNTER_BITS = 17
+
+
+def counters_base(program):
+    """The word index of the first overflow counter: after the settings."""
+    return SETTINGS_BASE + program.shadow_words
 
 
 @dataclass(frozen=True)
@@ -97,12 +104,13 @@ def register_map(program, config, variant):
         Register("CONTROL", 2, "rw", "Write 1 to act, between two updates; reads the actions still pending",
                  (("COMMIT", 0, 1, "copy the written settings in before the next update"),
                   ("RESET", 1, 1, "run the reset routine of every channel (from the committed reset values)"),
-                  ("CLEAR", 2, 1, "clear UPDATES, OVERFLOWS, COMMITTED and STATUS.OVERFLOW"))),
+                  ("CLEAR", 2, 1, "clear UPDATES, OVERFLOWS, COMMITTED, the OVF counters and STATUS.OVERFLOW"))),
         Register("STATUS", 3, "r", "The core's state",
                  (("COMMIT_PENDING", 0, 1, "a commit waits for the end of an update"),
                   ("RESET_PENDING", 1, 1, "a reset waits"),
                   ("OVERFLOW", 2, 1, "an estimate saturated (or wrapped) since CLEAR"),
-                  ("RUNNING", 3, 1, "a routine runs"))),
+                  ("RUNNING", 3, 1, "a routine runs"),
+                  ("CLEAR_PENDING", 4, 1, "the counters' clear waits"))),
         Register("UPDATES", 4, "r", f"Samples taken since CLEAR (wraps at 2**{COUNT_BITS})",
                  (("COUNT", 0, COUNT_BITS, "samples"),)),
         Register("OVERFLOWS", 5, "r", f"Estimates with the overflow flag since CLEAR (holds at 2**{COUNT_BITS} - 1)",
@@ -120,6 +128,11 @@ def register_map(program, config, variant):
                 f"{what} {st.name} ({st.label}, {st.fmt}): digit {dgt} of {st.digits}, "
                 + ("signed 18 bits" if top else "bits [16:0] of its 17-bit slice"),
                 (("DIGIT", 0, 18 if top else 17, "the digit"),), st, dgt))
+    base = counters_base(program)
+    for j, point in enumerate(program.counters):
+        regs.append(Register(f"OVF_{_c_name(str(point))}", base + j, "r",
+                             f"Writes into point {point} that saturated (or wrapped) since CLEAR (wraps at "
+                             f"2**{COUNTER_BITS})", (("COUNT", 0, COUNTER_BITS, "writes"),), point))
     return regs
 
 

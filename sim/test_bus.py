@@ -57,17 +57,38 @@ class Bus:
         return await with_timeout(self.master.read_dword(4 * index), BUS_TIMEOUT_CYCLES * SYSTEM_PERIOD_NS, "ns")
 
 
-def expected(configs, variant, codes, missing, switches):
-    """The model's estimates: ``configs[j]`` from sample ``switches[j - 1]`` on, the state carried."""
+def point_counts(model, result):
+    """``{point: writes that saturated}`` of a model's run: its sites' flags, summed by point."""
+    points = dict(model.kernel(False).site_points)
+    if model.predicts:
+        points.update(model.kernel(False, predict=True).site_points)
+    out = {}
+    for site, flags in result.overflow_sites.items():
+        out[points[site]] = out.get(points[site], 0) + int(np.count_nonzero(flags))
+    return out
+
+
+def expected(configs, variant, codes, missing, switches, counts=None):
+    """The model's estimates: ``configs[j]`` from sample ``switches[j - 1]`` on, the state carried;
+    ``counts``, a dict given, gets each point's saturated writes over the run."""
     cuts = [0, *switches, len(codes)]
     state, parts = None, []
     for config, lo, hi in zip(configs, cuts[:-1], cuts[1:], strict=True):
-        res = FixedModel(config, variant=variant).run(codes[lo:hi], state, missing=missing[lo:hi])
+        model = FixedModel(config, variant=variant)
+        res = model.run(codes[lo:hi], state, missing=missing[lo:hi])
         parts.append(res)
         state = res.state
+        if counts is not None:
+            for point, n in point_counts(model, res).items():
+                counts[point] = counts.get(point, 0) + n
     names = parts[0].outputs.keys()
     return {**{n: np.concatenate([p.outputs[n] for p in parts]) for n in names},
             "overflow": np.concatenate([p.overflow for p in parts]).astype(int)}
+
+
+async def read_counters(bus, counters):
+    """``{point: count}`` of the core's overflow counters (``[[word index, point], ...]``)."""
+    return {point: await bus.read(index) for index, point in counters}
 
 
 async def write_phases(dut, bus, sink, phases, n):
@@ -122,7 +143,9 @@ async def settings_mid_stream(dut):
     await with_timeout(collecting, n * per_sample + 100_000, "ns")
     await sending
     updates, overflows = (await bus.read(UPDATES), await bus.read(OVERFLOWS)) if bus else (n, None)
-    want = expected(configs, variant, codes, missing, switches)
+    counted = await read_counters(bus, p.get("counters", [])) if bus else {}
+    counts = {}
+    want = expected(configs, variant, codes, missing, switches, counts)
     # the new settings must change the estimates (else the check could not tell them apart), and
     # a switch one sample off must not give the same ones
     unchanged = expected(configs[:1], variant, codes, missing, [])
@@ -138,13 +161,16 @@ async def settings_mid_stream(dut):
     report = {"ok": not mismatches and len(sink.words) == n, "samples": n, "compared": len(sink.words),
               "mismatches": len(mismatches), "first": mismatches[:5], "switches": switches,
               "missing": int(missing.sum()), "updates": updates, "overflows": overflows,
-              "model_overflows": int(want["overflow"].sum()), "id": identity, "bus": p.get("bus"), "differ": differ}
+              "model_overflows": int(want["overflow"].sum()), "id": identity, "bus": p.get("bus"), "differ": differ,
+              "counters": counted, "model_counts": counts}
     write_results(p, report)
     assert report["ok"], report
     assert all(0 < s < n for s in switches) and switches == sorted(switches), report
     if bus:
         assert updates == n and overflows == report["model_overflows"], report
         assert identity == p["id"], report
+        assert counted == {point: counts.get(point, 0) for point in counted}, report
+        assert set(counts) <= set(counted), report  # every point that can saturate has its counter
     assert not phases or (differ["unswitched"] and differ["one_early"]), report
     assert not missing.any() or differ["measured"], report
 
@@ -193,8 +219,11 @@ async def reset_and_clear(dut):
     await with_timeout(source.send(words[half:]), (n - half) * per_sample + 100_000, "ns")
     await with_timeout(collecting, n * per_sample + 100_000, "ns")
     after = await bus.read(UPDATES)
+    counted = await read_counters(bus, p.get("counters", []))
     first = FixedModel(config, variant=variant).run(codes[:half], missing=missing[:half])
-    second = FixedModel(new, variant=variant).run(codes[half:], missing=missing[half:])  # from the new reset state
+    second_model = FixedModel(new, variant=variant)
+    second = second_model.run(codes[half:], missing=missing[half:])  # from the new reset state
+    counts = point_counts(second_model, second)
     want = {name: np.concatenate([first.outputs[name], second.outputs[name]]) for name in first.outputs}
     want["overflow"] = np.concatenate([first.overflow, second.overflow]).astype(int)
     mismatches = [(i, name, int(w[name]), int(want[name][i])) for i, w in enumerate(sink.words) for name in want
@@ -202,8 +231,10 @@ async def reset_and_clear(dut):
     carried = FixedModel(new, variant=variant).run(codes[half:], first.state, missing=missing[half:])
     report = {"ok": not mismatches and len(sink.words) == n, "samples": n, "mismatches": len(mismatches),
               "first": mismatches[:5], "updates_before": before, "updates_cleared": cleared, "updates_after": after,
-              "reset_matters": int(sum(np.count_nonzero(carried.outputs[k] != second.outputs[k]) for k in first.outputs))}
+              "reset_matters": int(sum(np.count_nonzero(carried.outputs[k] != second.outputs[k]) for k in first.outputs)),
+              "counters": counted, "model_counts": counts}
     write_results(p, report)
     assert report["ok"], report
     assert before == half and cleared == 0 and after == n - half, report
     assert report["reset_matters"], report
+    assert counted == {point: counts.get(point, 0) for point in counted}, report

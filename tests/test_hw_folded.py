@@ -251,3 +251,31 @@ def test_a_floor_from_digit_q_up_is_the_floor(s, n, seed):
         assert all(m.a[0] == "k" or m.a in v.addrs[(s - 1) // 17:] or m.a[1] != "v" for m in low.code)
         _steps_run(low.code, regs)
         assert from_digits([regs[a] for a in out.addrs]) == value >> s, (value, s, n)
+
+
+@pytest.mark.parametrize("variant", ["steady", "full"])
+def test_the_programmable_microcode_counts_each_points_overflows_as_the_model(variant, seed):
+    """A programmable program's overflow counters (one register-file word a point) after a run of
+    saturating samples, a fifth missing: each point's saturated writes, as the model's sites flag them."""
+    import tomllib
+
+    config = FilterConfig.from_dict(tomllib.loads('[filter]\nname = "kalman2"\n[formats.e]\nformat = "Q9.1"\n'),
+                                    check_ranges=False)
+    rng = np.random.default_rng(seed)
+    y = np.clip(rng.normal(0, 9000, 300), -32768, 32767).astype(np.int64)
+    missing = rng.random(300) < 0.2
+    program = compile_update(config, variant, predict=True, programmable=True)
+    regs = []
+    outs, flags = execute(program, [{"y": int(c)} for c in y], [0] * len(y), missing=missing, registers=regs)
+    model = FixedModel(config, variant=variant)
+    res = model.run(y, missing=missing)
+    for name in res.outputs:
+        np.testing.assert_array_equal([o[name] for o in outs], res.outputs[name])
+    assert flags == res.overflow.tolist()
+    points = {**model.kernel(False).site_points, **model.kernel(False, predict=True).site_points}
+    want = {}
+    for site, hit in res.overflow_sites.items():
+        want[points[site]] = want.get(points[site], 0) + int(np.count_nonzero(hit))
+    got = {point: regs[program.counter_base + j] for j, point in enumerate(program.counters)}
+    assert got == {point: want.get(point, 0) for point in got} and set(want) <= set(got)
+    assert sum(got.values()) > 0
