@@ -101,9 +101,13 @@ def build(simulator, design, *, config=None, root=DEFAULT_ROOT, waves=False, qui
         os.environ.update(verilator_env())
     with file_lock(root / simulator / f".{design}-{digest}.lock"):
         src = build_dir / "src"
-        src.mkdir(parents=True, exist_ok=True)
-        for f in staging.iterdir():
-            shutil.copy2(f, src / f.name)
+        stamp = build_dir / ".built"
+        if not stamp.exists():
+            # a cached build keeps its sources untouched: newer copies would make the runner
+            # compile again over the binary another worker is running
+            src.mkdir(parents=True, exist_ok=True)
+            for f in staging.iterdir():
+                shutil.copy2(f, src / f.name)
         shutil.rmtree(staging, ignore_errors=True)
         verilog = src / verilog.name
         runner = get_runner(simulator)
@@ -114,7 +118,6 @@ def build(simulator, design, *, config=None, root=DEFAULT_ROOT, waves=False, qui
             build_args = ["-O3", "--x-assign", "fast", "--x-initial", "fast", "-Wno-fatal"]
             if waves and verilator_fst():  # FST, as Icarus writes: compressed, a tenth of the VCD's size
                 build_args.append("--trace-fst")
-        stamp = build_dir / ".built"
         log = build_dir / "build.log"
         if not stamp.exists():
             runner.build(sources=sources, hdl_toplevel=toplevel, build_dir=build_dir, timescale=("1ns", "1ps"),
@@ -169,6 +172,8 @@ def run(built, test_module, *, params, testcase=None, waves=False, quiet=True, t
                           results_xml=str(xml), waves=waves, log_file=log if quiet else None)
     except SystemExit as exc:
         raise SimulationFailed(f"{built.simulator} exited with {exc.code}\n{_tail(log)}") from None
+    except RuntimeError as exc:  # the runner's own words for a simulator that exited non-zero
+        raise SimulationFailed(f"{built.simulator}/{built.design}: {exc}\n{_tail(log)}") from None
     finally:
         stop.set()
         if pytest_var is not None:
