@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 BUILD  := build
 
-.PHONY: demo test test-long models docs bench lint venv clean formal mutate mutate-source regress
+.PHONY: demo check test test-long models docs bench lint venv clean formal mutate mutate-source regress
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -14,6 +14,12 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 venv: $(STAMP)
+
+# the fast tier: lint (ruff and the import contracts) with the unit and model tests, no simulator
+# and no synthesis (about 1 minute on 2 cores; tests/conftest.py lists its files)
+check: $(STAMP)
+	$(BIN)/lint-imports
+	$(BIN)/python -m pytest -n auto -m check
 
 test: $(STAMP)
 	$(BIN)/lint-imports

@@ -248,6 +248,7 @@ def test_argparse_errors_end_with_the_one_line_error():
     assert lines[0].startswith("usage: kfpga compare") and lines[-1] == "kfpga compare: error: unrecognized arguments: --bogus"
 
 
+@pytest.mark.slow  # Yosys compiles its WebAssembly again under the fresh HOME (about 35 s)
 def test_the_tool_runs_from_an_unactivated_venv(tmp_path):
     """No venv on PATH (a user runs .venv/bin/kfpga): Yosys still comes from the interpreter's package."""
     from kfpga.core.tools import yosys_command

@@ -204,6 +204,7 @@ def test_a_toy_filter_gets_the_generic_commands(toy, tmp_path, capsys, seed):
     assert claims[0]["verdict"] == "reproduced" and claims[0]["runs"] == 3
 
 
+@pytest.mark.slow  # co-simulates the toy filter's core
 def test_a_toy_filter_passes_the_contract(toy, tmp_path, seed):
     from tests.contract import test_contract as contract
 
