@@ -9,7 +9,7 @@ States (one ADC CLK period each, advancing on the clock divider's strobe)::
     READ1          RD low; the data bus is captured at the end of the period
 
 The machine reads only after the conversion is complete, with the address stable before RD
-falls (seeds/001 4.2.2). In six-channel mode CONV0 pulls all three HOLDs low, so all six
+falls ([Zhong] 4.2.2). In six-channel mode CONV0 pulls all three HOLDs low, so all six
 channels are sampled at the same instant, and READ0/READ1 repeat for addresses 0..5.
 
 What a real board needs, beyond the paper:

@@ -1,4 +1,4 @@
-"""The alpha-beta tracker's cores (seeds/004): one pipelined loop shared by many tracks.
+"""The alpha-beta tracker's cores ([Chen]): one pipelined loop shared by many tracks.
 
 The update is the model's own (``model/alphabeta.py``), through the steps of the constant-velocity
 loop (``hw/cvloop.py``), which the paper's steady-state filter runs too: xp = x + T v, e = z - xp,

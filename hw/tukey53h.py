@@ -1,4 +1,4 @@
-"""The streaming 53H core (seeds/002): one sample per clock, channels interleaved.
+"""The streaming 53H core ([Lu]): one sample per clock, channels interleaved.
 
 The stages are the model's own (``model/tukey53h.py``), one register stage each:
 

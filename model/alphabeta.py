@@ -1,4 +1,4 @@
-"""The alpha-beta tracker of seeds/004 (marine radar ARPA): its equations and its spec.
+"""The alpha-beta tracker of [Chen] (marine radar ARPA): its equations and its spec.
 
 Per axis of a track, with the measurement ``z`` and the sample period ``T``::
 
@@ -22,7 +22,7 @@ Choosing beta from alpha (:func:`benedict_bordner`, :func:`critically_damped`,
   filter of this model (white noise on the rate, ``G = [0, 1]``): every Q/R gives a pair on it;
 * critically damped (both poles of the loop at ``theta``: the fading-memory filter),
   ``alpha = 1 - theta^2``, ``beta = (1 - theta)^2``;
-* the paper (seeds/004) uses alpha = 0.5 and states beta = 0.5 from its formula (7), which is
+* the paper ([Chen]) uses alpha = 0.5 and states beta = 0.5 from its formula (7), which is
   not legible; neither relation above gives 0.5 at alpha = 0.5 (0.167 and 0.086). The preset
   ``ab-paper`` takes the paper's stated values as printed; ``beta = alpha^2 / (1 - alpha)`` is a
   relation that gives them, a guess at (7) only.
@@ -296,7 +296,7 @@ SPEC = FilterSpec(
     name="alphabeta",
     aliases=("alpha-beta",),
     summary="alpha-beta tracker (marine radar ARPA), constant gains alpha, beta; one axis of a track per channel",
-    source="seeds/004: Chen and Yang 2016, Research on the alpha-beta algorithm of a marine radar ARPA system",
+    source="[Chen]: Chen and Yang 2016, Research on the alpha-beta algorithm in a marine radar ARPA system",
     params=AlphaBetaParams,
     points=POINTS,
     inputs=(("z", "the measured position (a radar coordinate, 16-bit)"),),
@@ -312,7 +312,7 @@ SPEC = FilterSpec(
     default_output="x",
     random_params=_random_params,
     presets={
-        "ab-paper": ("the paper's tracker (seeds/004): alpha = beta = 0.5 as printed, T = 1", AlphaBetaParams),
+        "ab-paper": ("the paper's tracker ([Chen]): alpha = beta = 0.5 as printed, T = 1", AlphaBetaParams),
         "ab-bb": ("Benedict-Bordner at the paper's alpha = 0.5: beta = alpha^2/(2 - alpha) = 0.1667, T = 1",
                   lambda: AlphaBetaParams(alpha=0.5, beta=benedict_bordner(0.5))),
         "ab-critical": ("critically damped at the paper's alpha = 0.5: beta = (1 - sqrt(1 - alpha))^2 = 0.0858, T = 1",

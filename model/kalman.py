@@ -1063,10 +1063,10 @@ def _preset_fixed_gain():
 #: which keeps its own datapath: the rate scaled by T, both halves of P); the others are models of
 #: this general filter.
 PRESETS = {
-    "ca3": ("constant acceleration, T = 0.5 s (seeds/000, the ship-roll predictor; A's bottom-right entry 1; "
+    "ca3": ("constant acceleration, T = 0.5 s ([Zhang], the ship-roll predictor; A's bottom-right entry 1; "
             "P0 = 10 I, as the paper's all-10s matrix is singular)", _preset_ca3),
-    "va2": ("velocity and acceleration, both observed (seeds/003, fed by the least-squares front end)", _preset_va2),
-    "cv2-fixed-gain": ("fixed gain alpha = beta = 0.5 on the constant-velocity model (seeds/004's values)",
+    "va2": ("velocity and acceleration, both observed ([Fukuda], fed by the least-squares front end)", _preset_va2),
+    "cv2-fixed-gain": ("fixed gain alpha = beta = 0.5 on the constant-velocity model ([Chen]'s values)",
                        _preset_fixed_gain),
 }
 
@@ -1090,7 +1090,7 @@ def _error_std(params, *, measurement_only=False):
 SPEC = FilterSpec(
     name="kalman",
     summary="any linear state-space model: n = 1..4 states, m = 1..2 observations, from F, G, Q, H, R",
-    source="your own linear state-space model: the general form of seeds/000, 001, 003 and 004",
+    source="your own linear state-space model: the general form of [Zhang], [Zhong], [Fukuda] and [Chen]",
     params=StateSpaceParams,
     points=POINTS,
     inputs=_inputs,

@@ -1,4 +1,4 @@
-"""The paper's 2-state Kalman filter (seeds/001): its equations, once, and its spec.
+"""The paper's 2-state Kalman filter ([Zhong]): its equations, once, and its spec.
 
 Both variants run in the datapath's units (``v = T*x2``, ``P' = D P D``, see
 :meth:`~kfpga.model.reference.KalmanParams.scaled`), so T never multiplies inside the loop.
@@ -320,7 +320,7 @@ def _mutation():
 SPEC = FilterSpec(
     name="kalman2",
     summary="the paper's 2-state Kalman filter (angle, rate), steady-state or time-varying gain",
-    source="seeds/001: Zhong et al. 2008, Design and implementation of a Kalman filter based on FPGA",
+    source="[Zhong]: Zhong et al., Design and implementation of Kalman filter based on FPGA",
     params=KalmanParams,
     points=POINTS,
     inputs=(("y", "the ADC code"),),
@@ -336,7 +336,7 @@ SPEC = FilterSpec(
     goals=_goals,
     default_output="x1",
     random_params=_random_params,
-    presets={"cv2": ("the paper's constant-velocity filter (seeds/001): T = 1, Q = 2, R = 4, P0 = 10 I", KalmanParams)},
+    presets={"cv2": ("the paper's constant-velocity filter ([Zhong]): T = 1, Q = 2, R = 4, P0 = 10 I", KalmanParams)},
     error_std=_error_std,
     mutation=_mutation,
     period=lambda params: (params.T, True),

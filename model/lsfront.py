@@ -1,4 +1,4 @@
-"""The least-squares pseudo-acceleration front end of seeds/003 (Furuno, JP3218441B2), in float.
+"""The least-squares pseudo-acceleration front end of [Fukuda] (Furuno, JP3218441B2), in float.
 
 A ship's speed log gives the velocity alone. The front end keeps its last ``Ns`` samples, fits a
 line to them by least squares, and gives the Kalman filter of the ``va2`` model (state velocity
@@ -589,7 +589,7 @@ SPEC = FilterSpec(
     aliases=("ls-frontend",),
     summary="the least-squares pseudo-acceleration front end into the va2 filter: a line through the last Ns speed-log "
             "samples gives the velocity and its slope, Ns from the innovation; steady-state gains per mode",
-    source="seeds/003: Furuno, JP3218441B2, a ship's speed with a least-squares front end to a Kalman filter",
+    source="[Fukuda]: Fukuda (Furuno), JP3218441B2, a ship's speed with a least-squares front end to a Kalman filter",
     params=LSFrontParams,
     points=POINTS,
     inputs=(("v", "the speed log's velocity (a 16-bit ADC code, lsb m/s per code)"),),

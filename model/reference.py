@@ -1,4 +1,4 @@
-"""Float64 reference Kalman filters for the paper's 2-state model (seeds/001).
+"""Float64 reference Kalman filters for the paper's 2-state model ([Zhong]).
 
 State ``x = [x1, x2]`` (position, rate), ``Phi = [[1, T], [0, 1]]``, ``G = [0, 1]^T``,
 ``C = [1, 0]``, process noise ``G Q G^T``, measurement noise ``R``, ``u = 0``.

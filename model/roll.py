@@ -1,4 +1,4 @@
-"""The ship-roll "combined interval" Kalman predictor of seeds/000, in float.
+"""The ship-roll "combined interval" Kalman predictor of [Zhang], in float.
 
 The roll angle is sampled every ``T`` = 0.5 s. Two 3-state constant-acceleration filters take
 alternate samples (even and odd), so each sees one sample per ``2 T`` = 1 s, and each predicts
@@ -630,7 +630,7 @@ SPEC = FilterSpec(
     name="roll",
     summary="ship-roll interval predictor: two constant-acceleration filters on alternate samples, improved form, "
             "square-root covariance; each sample's prediction of the sample 2 ahead (1 s)",
-    source="seeds/000: the combined interval Kalman predictor of ship roll",
+    source="[Zhang]: Zhang et al. 2021, the combined interval Kalman predictor of ship roll",
     params=RollParams,
     points=POINTS,
     inputs=(("z", "the roll angle (a 16-bit ADC code, lsb degrees per code)"),),

@@ -1,4 +1,4 @@
-"""Tukey's 53H outlier smoother (seeds/002): its equations, its online and offline forms, its spec.
+"""Tukey's 53H outlier smoother ([Lu]): its equations, its online and offline forms, its spec.
 
 For a series ``x``:
 
@@ -538,7 +538,7 @@ SPEC = FilterSpec(
     name="tukey53h",
     aliases=("53h",),
     summary="Tukey's 53H outlier smoother (medians of 5 and 3, Hanning, threshold test); 4 samples late",
-    source="seeds/002: Lü and Geng 2019, online smoothing of ship integrated-navigation data by 53H filtering",
+    source="[Lu]: Lü and Geng 2019, online smoothing of ship integrated-navigation data by 53H filtering",
     params=Tukey53HParams,
     points=POINTS,
     inputs=(("y", "the sample (a 16-bit ADC code)"),),

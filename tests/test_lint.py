@@ -52,3 +52,17 @@ def test_a_long_function_is_found(tmp_path):
     body = "\n".join(f"    x{k} = {k}" for k in range(85))
     (tmp_path / "a.py").write_text(f"def short():\n    return 1\n\n\ndef long():\n{body}\n")
     assert long_functions([tmp_path / "a.py"], root=tmp_path) == [("a.py:5 long", 86)]
+
+
+def test_the_source_documents_are_cited_by_their_references():
+    """The code and the manual cite a source document by its key in docs/references.md ([Zhong],
+    [Zhang], [Lu], [Fukuda], [Chen]), never by a file of a folder that is not in the repository."""
+    import re
+
+    pattern = re.compile("seeds" + r"/\d{3}")  # in two parts so that this file does not match itself
+    paths = [p for folder in ("kfpga", "model", "hw", "sim", "tests", "bench", "docs", "examples")
+             for p in sorted((ROOT / folder).rglob("*")) if p.suffix in (".py", ".md", ".csv", ".toml", ".txt")]
+    offenders = [str(p.relative_to(ROOT)) for p in [*paths, ROOT / "README.md"] if pattern.search(p.read_text())]
+    assert offenders == [], offenders
+    keys = set(re.findall(r"\*\*\[(\w+)\]\*\*", (ROOT / "docs" / "references.md").read_text()))
+    assert keys == {"Zhong", "Zhang", "Lu", "Fukuda", "Chen"}

@@ -1,4 +1,4 @@
-"""The alpha-beta tracker's model (seeds/004): its parameters, its relations, its equality with
+"""The alpha-beta tracker's model ([Chen]): its parameters, its relations, its equality with
 the steady-state Kalman filter, its evaluation and the many-track replay of ``kfpga filter``
 (its cores: tests/test_hw_alphabeta.py)."""
 

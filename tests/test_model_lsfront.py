@@ -1,4 +1,4 @@
-"""The least-squares front end of seeds/003: the running sums against numpy's fit on every
+"""The least-squares front end of [Fukuda]: the running sums against numpy's fit on every
 window, the window table, the m = 1 start, the evaluation, and the bit-accurate front end
 against its float form (its core: tests/test_hw_lsfront.py)."""
 

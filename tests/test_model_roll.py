@@ -1,4 +1,4 @@
-"""The ship-roll interval predictor of seeds/000: in float, its forms against each other and
+"""The ship-roll interval predictor of [Zhang]: in float, its forms against each other and
 against an independent Kalman filter, the paper's data, the evaluation and its bad input; in
 fixed point, against float and its word lengths (its core: tests/test_hw_roll.py)."""
 

@@ -1,5 +1,5 @@
 # amaranth: UnusedElaboratable=no
-"""The 53H smoother's model (seeds/002): against the method's own definition, the offline end
+"""The 53H smoother's model ([Lu]): against the method's own definition, the offline end
 handling, the comparator networks, angles and wide inputs, the evaluation and the CLI (its core
 and the board's pre-filter: tests/test_hw_tukey53h.py)."""
 

@@ -3,7 +3,7 @@
 # Ref: Texas Instruments SBAS219C, "ADS8364: 250kSPS, 16-bit, 6-channel simultaneous sampling
 #      ADC", sections "Timing and control", "Explanation of clock, reset, FD and EOC pins",
 #      "Getting data" (Figure 7, Figure 9).
-# Ref: Zhong et al. 2008 (seeds/001), section 4.2 (EOC low for half a clock cycle; HOLD >= 20 ns;
+# Ref: [Zhong], section 4.2 (EOC low for half a clock cycle; HOLD >= 20 ns;
 #      22-state controller; read only after the conversion, address stable before RD).
 
 Every timing figure lives in :data:`TIMING`, with its source and whether the source text was
@@ -55,11 +55,11 @@ TIMING = {
         Timing("tCONV", "acquisition + conversion", "typ", 20.0, "clk",
                "SBAS219C, Timing and control: acquisition and conversion take 20 clock cycles", "confirmed"),
         Timing("tHOLDL", "HOLDx low width", "min", 20.0, "ns",
-               "seeds/001 4.2.1 and the ADS8364 datasheet: HOLDx low for at least 20 ns starts a conversion", "confirmed"),
+               "[Zhong] 4.2.1 and the ADS8364 datasheet: HOLDx low for at least 20 ns starts a conversion", "confirmed"),
         Timing("tHOLDH", "HOLDx high width between conversions", "min", 15.0, "ns",
                "sibling ADS7864 (SBAS141A, t2 = 15 ns); not seen for the ADS8364", "assumed"),
         Timing("tEOC", "EOC low width", "typ", 0.5, "clk",
-               "seeds/001 4.2.1 and the ADS8364 datasheet: EOC low for half a clock cycle", "confirmed"),
+               "[Zhong] 4.2.1 and the ADS8364 datasheet: EOC low for half a clock cycle", "confirmed"),
         Timing("tW4", "RESET low width", "min", 20.0, "ns",
                "SBAS219C, Explanation of reset, Figure 7", "confirmed"),
         Timing("tD2", "RESET high before the next HOLD falling edge", "min", 20.0, "ns",
@@ -75,7 +75,7 @@ TIMING = {
     )
 }
 
-#: Output coding: 16-bit binary two's complement (seeds/001 4.2.1: "the MSB is the sign bit";
+#: Output coding: 16-bit binary two's complement ([Zhong] 4.2.1: "the MSB is the sign bit";
 #: the sibling ADS8361's table, SBAS230E, lists 7FFFh..8000h for +FS..-FS).
 OUTPUT_CODING = "twos_complement"
 #: One conversion result as a fixed-point value: a signed 16-bit integer code.

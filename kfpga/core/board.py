@@ -9,7 +9,7 @@ from dataclasses import dataclass
 __all__ = ["SYSTEM_MHZ", "SYSTEM_PERIOD_NS", "WORST_PATH_GOAL_NS", "Board", "CONVERSION_PERIODS", "MAX_SENSORS",
            "sensor_bits"]
 
-#: The 50 MHz oscillator of the paper's board (seeds/001, section 4.1): the one clock domain.
+#: The 50 MHz oscillator of the paper's board ([Zhong], section 4.1): the one clock domain.
 SYSTEM_MHZ = 50.0
 #: Its period, 20 ns.
 SYSTEM_PERIOD_NS = 1000.0 / SYSTEM_MHZ

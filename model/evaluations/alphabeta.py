@@ -1,4 +1,4 @@
-"""The alpha-beta tracker's source document, rerun: ``kfpga evaluate alphabeta`` (seeds/004).
+"""The alpha-beta tracker's source document, rerun: ``kfpga evaluate alphabeta`` ([Chen]).
 
 Several radar targets in straight-line uniform motion, in 2-D radar pixel coordinates with white
 noise, tracked by the alpha-beta filter (float and bit-accurate), the moving mean and the Kalman
@@ -312,7 +312,6 @@ def alpha_beta_plot(result, path):
     save_figure(fig, path, dpi=110)
 
 
-# -- seeds/002: the 53H outlier smoother on navigation data -----------------------------------------------
 
 
 def _add_arguments(parser):
@@ -353,7 +352,7 @@ def _run(options, seed):
 
 
 EVALUATION = Evaluation(
-    summary="seeds/004: alpha-beta tracking of radar targets against the moving mean and the Kalman filter",
+    summary="[Chen]: alpha-beta tracking of radar targets against the moving mean and the Kalman filter",
     description="Targets in straight-line uniform motion in 2-D radar pixel coordinates, with white noise (2 px per "
                 "axis) and plots rounded to whole pixels, tracked by the alpha-beta filter (the paper's alpha = beta "
                 "= 0.5, Benedict-Bordner and critically damped beta at alpha = 0.5; float and bit-accurate), the "

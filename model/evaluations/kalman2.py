@@ -1,4 +1,4 @@
-"""The paper's own evaluation, rerun: ``kfpga evaluate kalman2`` (seeds/001).
+"""The paper's own evaluation, rerun: ``kfpga evaluate kalman2`` ([Zhong]).
 
 Its Simulink test: a sine with white Gaussian noise through the 2-state filter; the time-varying
 filter and its steady-state form (the gain K_inf in place of K_k); the covariance from any P0 to
@@ -140,7 +140,7 @@ def _check(options):
 
 
 EVALUATION = Evaluation(
-    summary="seeds/001: the paper's 2-state filter on its noisy sine, time-varying and steady-state, fixed and float",
+    summary="[Zhong]: the paper's 2-state filter on its noisy sine, time-varying and steady-state, fixed and float",
     description="The paper's Simulink test: a sine with white Gaussian noise of variance R through the time-varying "
                 "filter and its steady-state form, in float and in the cores' integers (default formats); how far "
                 "the steady gain errs at the start; the covariance from four different P0. Prints the errors and the "

@@ -1,4 +1,4 @@
-"""The least-squares front end's source document, rerun: ``kfpga evaluate lsfront`` (seeds/003).
+"""The least-squares front end's source document, rerun: ``kfpga evaluate lsfront`` ([Fukuda]).
 
 The patent's fig. 4: a ship decelerating from constant speed to a stop, its speed log noisy;
 the Kalman filter fed by the least-squares line, the one observing velocity and a measured
@@ -326,7 +326,7 @@ def _run(options, seed):
 
 
 EVALUATION = Evaluation(
-    summary="seeds/003: the least-squares pseudo-acceleration front end of a Kalman filter, on a ship decelerating "
+    summary="[Fukuda]: the least-squares pseudo-acceleration front end of a Kalman filter, on a ship decelerating "
             "to a stop",
     description="A ship at constant speed decelerating at a constant rate to a stop, its speed log noisy (the "
                 "patent's fig. 4). The patent's four curves: the Kalman filter fed with the least-squares line's "

@@ -1,4 +1,4 @@
-"""The ship-roll predictor's source document, rerun: ``kfpga evaluate roll`` (seeds/000).
+"""The ship-roll predictor's source document, rerun: ``kfpga evaluate roll`` ([Zhang]).
 
 The basic and the improved interval predictor on the paper's table 1 and a synthetic roll
 series: prediction RMSE, a sweep over the fading factor, the bit-accurate predictor and a
@@ -325,7 +325,6 @@ def roll_plot(result, path):
     save_figure(fig, path, dpi=110)
 
 
-# -- seeds/003: the least-squares front end ---------------------------------------------------------------
 
 
 def _add_arguments(parser):
@@ -402,7 +401,7 @@ def _run(options, seed, *, sweep_words=True):
 
 
 EVALUATION = Evaluation(
-    summary="seeds/000: the ship-roll interval predictor, basic and improved, on the paper's table 1 and a synthetic "
+    summary="[Zhang]: the ship-roll interval predictor, basic and improved, on the paper's table 1 and a synthetic "
             "roll series",
     description="Two constant-acceleration Kalman filters on alternate roll samples (T = 0.5 s), each predicting 2 "
                 "samples (1 s) ahead: the paper's basic form (predict, then update) and its improvements (update then "

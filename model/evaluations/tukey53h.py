@@ -1,4 +1,4 @@
-"""The 53H smoother's source document, rerun: ``kfpga evaluate tukey53h`` (seeds/002).
+"""The 53H smoother's source document, rerun: ``kfpga evaluate tukey53h`` ([Lu]).
 
 A ship's INS east and north velocity and heading, with seeded outliers, smoothed by the online
 and the offline 53H (bit-accurate), the 5-point cubic smoothing and a sliding weighted
@@ -384,9 +384,6 @@ def tukey53h_plot(result, path):
     save_figure(fig, path, dpi=110)
 
 
-# -- seeds/000: the ship-roll interval predictor ------------------------------------------------------------
-
-#: The paper's figures (its 480 samples): prediction RMSE before and after, and the requirement.
 
 
 def _add_arguments(parser):
@@ -411,7 +408,7 @@ def _scenario(options):
 
 
 EVALUATION = Evaluation(
-    summary="seeds/002: the 53H outlier smoother on a ship's navigation data against 5-point cubic smoothing and "
+    summary="[Lu]: the 53H outlier smoother on a ship's navigation data against 5-point cubic smoothing and "
             "sliding weighted least squares",
     description="A ship's INS east and north velocity, heading, latitude and longitude at 1 Hz for an hour "
                 "(synthetic: turns, a speed change, sea-induced yaw and surge, sensor noise; positions in 32-bit "
