@@ -274,6 +274,9 @@ class FilterSystem(wiring.Component):
         # checked first: a refused pre-filter leaves nothing built
         self.prefilter = None if prefilter is None else prefilter_core(prefilter, 6 if six_channel or len(self.adc) > 1
                                                                        else 1)
+        # the pre-filter's one input and the output it passes on, by its spec's names
+        self.prefilter_ports = None if prefilter is None else (
+            prefilter.spec.inputs_for(prefilter.params)[0][0], prefilter.spec.default_output)
         # several inputs: all six are converted at one instant and read; the update takes its own
         channels = 6 if six_channel or len(self.adc) > 1 else 1
         config.board.check(channels, ratio, self.sensors)
@@ -304,12 +307,13 @@ class FilterSystem(wiring.Component):
         source = _Words(frontend.o.valid, frontend.o.payload.channel, frontend.o.payload.sample)
         if self.prefilter is not None:
             m.submodules.prefilter = pre = self.prefilter
+            pre_in, pre_out = self.prefilter_ports
             m.d.comb += [pre.i.valid.eq(frontend.o.valid), frontend.o.ready.eq(pre.i.ready),
-                         pre.i.payload.y.eq(frontend.o.payload.sample)]
+                         getattr(pre.i.payload, pre_in).eq(frontend.o.payload.sample)]
             if self.prefilter.channels > 1:
                 m.d.comb += pre.i.payload.channel.eq(frontend.o.payload.channel)
             channel = pre.o.payload.channel if self.prefilter.channels > 1 else Const(self.channel, 3)
-            source = _Words(pre.o.valid, channel, pre.o.payload.y)
+            source = _Words(pre.o.valid, channel, getattr(pre.o.payload, pre_out))
             ready = pre.o.ready
         else:
             ready = frontend.o.ready

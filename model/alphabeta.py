@@ -281,6 +281,7 @@ TRACKS = Mode(
                       "core; the output has track, axis, x, v"},
     columns=_track_columns,
     run=_replay_tracks,
+    example="--tracks 40 --input plots.csv --output tracks.csv",
 )
 
 
@@ -290,6 +291,14 @@ def _mutation():
     from kfpga.core.config import FilterConfig
 
     return [MutationBlock("alphabeta core", eq.stressed(FilterConfig(filter=SPEC.name), 14), "steady", {"samples": 1200})]
+
+
+def _coverage():
+    """The many-track core (2 x 3 states through one loop)."""
+    from kfpga.core.config import FilterConfig
+    from kfpga.core.spec import resolve
+
+    return {"tracker3": lambda: resolve("kfpga.hw.alphabeta:TrackerCore")(FilterConfig(filter=SPEC.name), tracks=3)}
 
 
 SPEC = FilterSpec(
@@ -322,5 +331,6 @@ SPEC = FilterSpec(
     evaluation="kfpga.model.evaluations.alphabeta:EVALUATION",
     modes=(TRACKS,),
     mutation=_mutation,
+    coverage=_coverage,
     period=lambda params: (params.T, True),
 )

@@ -1087,6 +1087,20 @@ def _error_std(params, *, measurement_only=False):
     return out
 
 
+def _coverage():
+    """The README's tracker (T = 0.01: F's constants multiplied, not shifted), and states in block
+    memory whose power-up word packs a negative x0."""
+    from dataclasses import replace
+
+    from kfpga.core.config import FilterConfig
+
+    tracker = StateSpaceParams(F=((1.0, 0.01, 5e-5), (0.0, 1.0, 0.01), (0.0, 0.0, 1.0)), G=((0.0,), (0.0,), (1.0,)),
+                               Q=((1.0,),), H=((1.0, 0.0, 0.0),), R=((25.0,),), T=0.01)
+    negative = FilterConfig(filter=SPEC.name, params=replace(_preset_ca3(), x0=(-40.0, 3.5, -0.25)))
+    return {f"{SPEC.name}-tracker-T0.01": FilterConfig(filter=SPEC.name, params=tracker),
+            f"{SPEC.name}-ca3-x0-steady-parallel-9": lambda: SPEC.make_core(negative, "steady", channels=9)}
+
+
 SPEC = FilterSpec(
     name="kalman",
     summary="any linear state-space model: n = 1..4 states, m = 1..2 observations, from F, G, Q, H, R",
@@ -1108,6 +1122,7 @@ SPEC = FilterSpec(
     scenario=_scenario,
     scenarios=("model", "sine", "random-accel"),
     presets=PRESETS,
+    coverage=_coverage,
     measured=_measured,
     adc=lambda params: params.adc,
     error_std=_error_std,

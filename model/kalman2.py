@@ -197,7 +197,7 @@ def _steady_applies(params):
 
 
 VARIANTS = {
-    "steady": Variant("steady", "constant gain K_inf (an alpha-beta filter): one update per sample, no divider",
+    "steady": Variant("steady", "constant gain K_inf (a fixed-gain filter): one update per sample, no divider",
                       lambda params: (("x1", "x1"), ("v", "v"), *start.start_state(params)), _steady_constants,
                       _initial, steady_update, _steady_applies,  # the loop runs the start (hw/cvloop.py)
                       predict=steady_predict),
@@ -317,6 +317,13 @@ def _mutation():
             MutationBlock("full core", narrow, "full", {"samples": 150})]
 
 
+def _coverage():
+    """A sample period that is not a power of two: x2 = v / T in more steps."""
+    from kfpga.core.config import FilterConfig
+
+    return {f"{SPEC.name}-T0.3": FilterConfig(filter=SPEC.name, params=KalmanParams(T=0.3, Q=1.0, R=9.0))}
+
+
 SPEC = FilterSpec(
     name="kalman2",
     summary="the paper's 2-state Kalman filter (angle, rate), steady-state or time-varying gain",
@@ -339,6 +346,7 @@ SPEC = FilterSpec(
     presets={"cv2": ("the paper's constant-velocity filter ([Zhong]): T = 1, Q = 2, R = 4, P0 = 10 I", KalmanParams)},
     error_std=_error_std,
     mutation=_mutation,
+    coverage=_coverage,
     period=lambda params: (params.T, True),
     evaluation="kfpga.model.evaluations.kalman2:EVALUATION",
 )

@@ -11,6 +11,7 @@ outside the package gets every generic command, ``kfpga evaluate`` and the contr
 
 import ast
 import json
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,6 +30,10 @@ ROOT = Path(__file__).resolve().parent.parent
 #: The package's files, each once (kfpga/model, hw and sim link to the top-level folders).
 PACKAGE_FILES = [p for folder in ("kfpga", "model", "hw", "sim") for p in (ROOT / folder).rglob("*.py")
                  if not (folder == "kfpga" and p.relative_to(ROOT / folder).parts[0] in ("model", "hw", "sim"))]
+
+
+#: A word of a string: letters, digits and underscores, hyphens inside (``alpha-beta``, ``53h``).
+WORD = re.compile(r"[A-Za-z0-9_]+(?:-[A-Za-z0-9_]+)*")
 
 
 def _docstrings(tree):
@@ -58,7 +63,8 @@ def code_words(tree):
         elif isinstance(node, ast.arg):
             yield node.lineno, [node.arg]
         elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skip:
-            yield node.lineno, [node.value, *node.value.replace(":", ".").split(".")]
+            # every word of a string too: a help text, an example, a script kept in a string
+            yield node.lineno, [node.value, *node.value.replace(":", ".").split("."), *WORD.findall(node.value)]
 
 
 def own_file(path, name):
@@ -90,9 +96,12 @@ def test_a_filters_tests_are_named_by_layer(name):
 
 
 def test_the_check_finds_a_name():
-    tree = ast.parse('"""kalman2 in a docstring is fine."""\nfrom kfpga.model import kalman2\nx = "tukey53h"\n')
+    tree = ast.parse('"""kalman2 in a docstring is fine."""\nfrom kfpga.model import kalman2\nx = "tukey53h"\n'
+                     'EXAMPLE = "kfpga evaluate alpha-beta --seeds 5 (53h, roll)"\n'
+                     'SCRIPT = """\nfrom kfpga.hw.alphabeta import TrackerCore\nFilterConfig(filter=\'kalman\')\n"""\n')
     words = {w for _, ws in code_words(tree) for w in ws}
-    assert {"kalman2", "tukey53h"} <= words and "kalman2 in a docstring is fine." not in words
+    assert {"kalman2", "tukey53h", "alpha-beta", "53h", "roll", "alphabeta", "kalman"} <= words
+    assert "kalman2 in a docstring is fine." not in words and "docstring" not in words
 
 
 # -- a toy filter, registered from here -----------------------------------------------------------

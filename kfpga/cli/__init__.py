@@ -52,6 +52,8 @@ def build_parser():
     for command in COMMANDS:
         command.add_parser(sub)
         examples = getattr(command, "EXAMPLES", None)
+        if callable(examples):  # examples that name a registered filter, picked from the registry
+            examples = examples()
         if examples:
             p = sub.choices[command.__name__.rsplit(".", 1)[1]]
             p.epilog = "examples:\n" + "\n".join(f"  {line}" for line in examples)

@@ -434,7 +434,7 @@ def add_bus_args(p):
     """--missing and --bus: the folded core's no-measurement bit and register bus."""
     p.add_argument("--missing", action="store_true",
                    help="the input's no-measurement bit: a sample with it set is predicted only (folded core; "
-                        "kalman2, kalman)")
+                        f"{', '.join(registry.coasting())})")
     p.add_argument("--bus", choices=("avalon", "axi4lite"),
                    help="a register slave on the folded core: the constants (K, F, Q, R terms) and reset values "
                         "written at run time (kfpga regs), a soft reset, counters")

@@ -16,6 +16,16 @@ DEFAULT_SEEDS = 20
 MAX_SEEDS = 1000
 
 
+def _examples():
+    def evaluated(spec):
+        return spec.evaluation is not None
+
+    one, two, three = (registry.example(evaluated, skip=k) for k in range(3))
+    return (f"examples:\n  kfpga evaluate {one}    # seeds 1..20, the claims table\n"
+            f"  kfpga evaluate {two} --seeds 5 --json\n"
+            f"  kfpga evaluate {three} --seed 7 --plot {three}.png   # replay seed 7 alone")
+
+
 def add_parser(sub):
     p = sub.add_parser("evaluate", help="rerun a source document's own evaluation over many seeds: its scenario, "
                                         "table, claims with verdicts, and plot",
@@ -23,9 +33,7 @@ def add_parser(sub):
                                    "baselines over many seeds, print the table of the first seed and every claim of "
                                    "the document with its value, ours over the seeds, and a verdict (reproduced: it "
                                    "holds on every seed; not reproduced; not testable, with the reason).",
-                       epilog="examples:\n  kfpga evaluate roll                  # seeds 1..20, the claims table\n"
-                              "  kfpga evaluate alpha-beta --seeds 5 --json\n"
-                              "  kfpga evaluate 53h --seed 7 --plot 53h.png   # replay seed 7 alone",
+                       epilog=_examples(),
                        formatter_class=common.ExamplesFormatter)
     ev = p.add_subparsers(dest="evaluation", metavar="NAME", required=True)
     for spec in registry.specs():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from kfpga.cli import common
+from kfpga.core import registry
 
 
 def add_parser(sub):
@@ -108,7 +109,6 @@ def _plot(found, need, path, title):
 
 
 #: The examples ending ``kfpga explore --help``.
-EXAMPLES = (
-    'kfpga explore --config tracker.toml --plot build/explore.png',
-    'kfpga explore --filter alpha-beta --channels 6 --json',
-)
+def EXAMPLES():
+    return ("kfpga explore --config tracker.toml --plot build/explore.png",
+            f"kfpga explore --filter {registry.example()} --channels 6 --json")

@@ -16,9 +16,9 @@ def add_parser(sub):
                                    "'y', or the model's observation names) and write every output of the filter and, "
                                    "for fixed point, the per-sample overflow flag, in input units, one row per input "
                                    "row. A row whose input cells are empty (a blank line in a one-column file) is a "
-                                   "sample with no measurement: a filter that can predict only (kalman2, kalman) "
-                                   "coasts over it (x = F x, P = F P F' + G Q G'), and the output marks it in a "
-                                   "'missing' column.")
+                                   "sample with no measurement: a filter that can predict only "
+                                   f"({', '.join(registry.coasting())}) coasts over it (x = F x, P = F P F' + G Q G'), "
+                                   "and the output marks it in a 'missing' column.")
     p.add_argument("--input", required=True, metavar="CSV", help="input file with the filter's input columns")
     p.add_argument("--output", required=True, metavar="CSV", help="output file")
     common.add_filter_args(p)
@@ -94,7 +94,8 @@ def run(args):
 
 
 #: The examples ending ``kfpga filter --help``.
-EXAMPLES = (
-    'kfpga filter --config tracker.toml --input log.csv --output estimates.csv   # empty cells: lost samples',
-    'kfpga filter --filter alpha-beta --tracks 40 --input plots.csv --output tracks.csv',
-)
+def EXAMPLES():
+    lines = ["kfpga filter --config tracker.toml --input log.csv --output estimates.csv   # empty cells: lost samples"]
+    lines += [f"kfpga filter --filter {spec.name} {mode.example}" for spec in registry.specs() for mode in spec.modes
+              if mode.example]
+    return lines

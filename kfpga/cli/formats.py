@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from kfpga.cli import common
+from kfpga.core import registry
 from kfpga.core.errors import UsageError
 
 
@@ -117,7 +118,6 @@ def _print(rows):
 
 
 #: The examples ending ``kfpga formats --help``.
-EXAMPLES = (
-    'kfpga formats --config tracker.toml',
-    'kfpga formats --filter roll --toml > roll.toml   # a config to edit',
-)
+def EXAMPLES():
+    name = registry.example(skip=3)
+    return ("kfpga formats --config tracker.toml", f"kfpga formats --filter {name} --toml > {name}.toml   # a config to edit")

@@ -15,8 +15,6 @@ def add_parser(sub):
                                    ".qpf, .qsf (device, sources, pins from the pin table), .sdc, manifest.json, "
                                    "README.txt, and the Verilator lint waivers.")
     common.add_design_args(p, "1: filter one ADC channel; 6: sample all six with one HOLD and filter each (default: 1)")
-    p.epilog = ("example: kfpga generate --config tracker.toml --out build/tracker; "
-                "kfpga generate --filter alphabeta --channels 64 --out build/tracks (64 sensors on a multiplexer)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="output folder (created; a folder it wrote before is replaced whole)")
     p.add_argument("--channel", type=common.adc_channel, metavar="CH",

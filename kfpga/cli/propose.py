@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from kfpga.cli import common
+from kfpga.core import registry
 from kfpga.core.errors import UsageError
 
 
@@ -154,7 +155,6 @@ def _print(config, args, variants, described, rows, result, out):
 
 
 #: The examples ending ``kfpga propose --help``.
-EXAMPLES = (
-    'kfpga propose --config tracker.toml --out tracker-proposed.toml',
-    'kfpga propose --filter alpha-beta --objective bits --json',
-)
+def EXAMPLES():
+    return ("kfpga propose --config tracker.toml --out tracker-proposed.toml",
+            f"kfpga propose --filter {registry.example()} --objective bits --json")

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from kfpga.cli import common
+from kfpga.core import registry
 
 
 def add_parser(sub):
@@ -142,7 +143,6 @@ def _print(args, config, results, goals, met, note):
 
 
 #: The examples ending ``kfpga resources --help``.
-EXAMPLES = (
-    'kfpga resources --config tracker.toml',
-    'kfpga resources --filter 53h --channels 6 --json',
-)
+def EXAMPLES():
+    return ("kfpga resources --config tracker.toml",
+            f"kfpga resources --filter {registry.example(skip=2)} --channels 6 --json")

@@ -29,8 +29,6 @@ def add_parser(sub):
                         "--samples estimates of --scenario and --seed, random gaps on both streams); --channels N "
                         "is then its channel states")
     p.add_argument("--prefix", metavar="NAME", help="with --core-only: the core's module name (default: kfpga_FILTER)")
-    p.epilog = ("example: kfpga testbench --config tracker.toml --out build/tb --run-icarus; "
-                "kfpga testbench --core-only --filter 53h --prefix smooth --out build/smooth --run-icarus")
     common.add_json(p)
     p.set_defaults(func=run)
 

@@ -9,7 +9,8 @@ from __future__ import annotations
 import importlib
 
 __all__ = ["FILTERS", "DEFAULT", "get", "names", "specs", "spec_for", "register", "unregister", "aliases",
-           "canonical", "presets", "preset"]
+           "canonical", "presets", "preset",
+           "coasting", "example"]
 
 #: ``name -> module`` whose ``SPEC`` is the filter's :class:`~kfpga.core.spec.FilterSpec`; imported on
 #: use. The name is the stem of the filter's files in every layer (``model/NAME.py``, ``hw/NAME.py``,
@@ -90,6 +91,18 @@ def spec_for(params, filter=None):
         if type(params) is spec.params:
             return spec
     raise TypeError(f"params must be the parameters of a registered filter ({', '.join(names())}), not {params!r}")
+
+
+def coasting():
+    """The filters one of whose variants can predict only (a sample with no measurement)."""
+    return [spec.name for spec in specs() if any(v.predict is not None for v in spec.variants.values())]
+
+
+def example(has=lambda spec: True, skip=0):
+    """The name of a registered filter for a command's examples: the first (after ``skip``) of
+    those other than the default for which ``has(spec)`` holds, else the default."""
+    found = [spec.name for spec in specs() if spec.name != DEFAULT and has(spec)]
+    return found[skip] if len(found) > skip else DEFAULT
 
 
 def presets():

@@ -218,12 +218,15 @@ class Mode:
         ``run(config, variant, samples, value, *, exact, source) -> (columns, note)``: ``samples``
         ``{column: array}``; ``exact``: the bit-accurate model (else float); ``source``: the file's
         name for messages. Returns the output columns and a line for the report.
+    example:
+        The mode's arguments in the examples of ``kfpga filter --help`` (its option, the files).
     """
 
     option: str
     argument: Mapping
     columns: Callable
     run: Callable
+    example: str = ""
 
     @property
     def dest(self):
@@ -355,6 +358,11 @@ class FilterSpec:
         checks (``make formal``), for a core whose default datapath is too wide for the solver at
         the depth its pipeline needs; its handshake logic must not depend on the formats.
         ``None``: the default config.
+    coverage:
+        ``coverage() -> {label: FilterConfig | make}``: designs beyond its defaults and presets whose
+        cores take other branches (a sample period that is not a power of two, another core class),
+        elaborated for the source-level mutants (``make mutate-source``): a config on every
+        variant and architecture, a ``make() -> core`` as it is.
     """
 
     name: str
@@ -386,6 +394,7 @@ class FilterSpec:
     prefilter: Prefilter | None = None
     mutation: Callable | None = None
     period: Callable | None = None
+    coverage: Callable | None = None
     scenarios: tuple = ("sine", "random-accel", "model")
 
     def __post_init__(self):

@@ -327,14 +327,15 @@ import json, sys, warnings
 warnings.simplefilter("ignore")
 from amaranth.back import rtlil
 from kfpga.core import registry
+from kfpga.core.board import Board
 from kfpga.core.config import FilterConfig
-from kfpga.hw.alphabeta import TrackerCore
 from kfpga.hw.divider import Divider
 from kfpga.hw.top import FilterSystem
 out = sys.argv[1]
 designs = {"divider": lambda: Divider(dividend_bits=12, divisor_bits=6, quotient_bits=7),
-           "tracker3": lambda: TrackerCore(FilterConfig(filter="alphabeta"), tracks=3),
-           "top": lambda: FilterSystem(FilterConfig())}
+           "top": lambda: FilterSystem(FilterConfig()),
+           # the board's conversion timer (a [board] sample rate)
+           "top-rate": lambda: FilterSystem(FilterConfig(board=Board(sample_rate_hz=50e6 / 600)))}
 for spec in registry.specs():
     config = FilterConfig(filter=spec.name)
     for variant in spec.variants:
@@ -348,30 +349,22 @@ for spec in registry.specs():
                     def staged(spec=spec, config=config, variant=variant, stages=stages):
                         return spec.make_core(config, variant, architecture="parallel", stages=stages)
                     designs[f"{spec.name}-{variant}-stages{stages}"] = staged
-# the branches the defaults do not take: each preset, and the two models of a sample period that
-# is not a power of two (x2 = v / T in more steps; F's constants multiplied), one channel each
-from kfpga.model.kalman import StateSpaceParams
-from kfpga.model.reference import KalmanParams
+# the branches the defaults do not take: each preset, and each filter's own coverage designs
+# (a config on one channel of every variant and architecture, or a core as it is)
 models = {f"{spec.name}-{preset}": FilterConfig(filter=spec.name, params=params())
           for spec in registry.specs() for preset, (_, params) in (spec.presets or {}).items()}
-models["kalman2-T0.3"] = FilterConfig(filter="kalman2", params=KalmanParams(T=0.3, Q=1.0, R=9.0))
-models["kalman-tracker-T0.01"] = FilterConfig(filter="kalman", params=StateSpaceParams(
-    F=((1.0, 0.01, 5e-5), (0.0, 1.0, 0.01), (0.0, 0.0, 1.0)), G=((0.0,), (0.0,), (1.0,)), Q=((1.0,),),
-    H=((1.0, 0.0, 0.0),), R=((25.0,),), T=0.01))
+for spec in registry.specs():
+    for label, what in (spec.coverage() if spec.coverage is not None else {}).items():
+        if isinstance(what, FilterConfig):
+            models[label] = what
+        else:
+            designs[label] = what
 for label, config in models.items():
     for variant in config.spec.variants:
         for arch in config.spec.architectures(variant, config.params):
             def one(config=config, variant=variant, arch=arch):
                 return config.spec.make_core(config, variant, architecture=arch)
             designs[f"{label}-{variant}-{arch}"] = one
-# the board's conversion timer (a [board] sample rate), and states in block memory whose power-up
-# word packs a negative x0
-from dataclasses import replace
-from kfpga.core.board import Board
-designs["top-rate"] = lambda: FilterSystem(FilterConfig(board=Board(sample_rate_hz=50e6 / 600)))
-ca3 = models["kalman-ca3"]
-designs["kalman-ca3-x0-steady-parallel-9"] = lambda: ca3.spec.make_core(
-    FilterConfig(filter="kalman", params=replace(ca3.params, x0=(-40.0, 3.5, -0.25))), "steady", channels=9)
 done = {}
 for name, make in designs.items():
     try:
