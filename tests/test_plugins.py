@@ -5,26 +5,20 @@ outside the package gets every generic command, ``kfpga evaluate`` and the contr
   any ``NAME_*.py``) and the registry names the filter or imports its modules: identifiers,
   imports and strings (docstrings and comments may mention it).
 * Its tests are ``tests/test_model_NAME.py`` and ``tests/test_hw_NAME.py``.
-* A toy filter (a one-state exponential smoother), defined and registered in this file, runs
-  through the commands and the contract checks with no package file edited.
+* A toy filter (a one-state exponential smoother, ``tests/fixtures/toy_distribution``), installed
+  through an entry point alone, runs through the commands and the contract checks with no package
+  file edited.
 """
 
 import ast
 import json
 import re
-from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from kfpga.cli import main
 from kfpga.core import registry
-from kfpga.core.claims import Claim, spread
-from kfpga.core.formats import register_formats
-from kfpga.core.params import number
-from kfpga.core.spec import Constant, Evaluation, FilterSpec, Output, Point, Variant
-from kfpga.model.ranges import float_ranges, full_scale_stimulus
 
 ROOT = Path(__file__).resolve().parent.parent
 #: The package's files, each once (kfpga/model, hw and sim link to the top-level folders).
@@ -104,93 +98,35 @@ def test_the_check_finds_a_name():
     assert "kalman2 in a docstring is fine." not in words and "docstring" not in words
 
 
-# -- a toy filter, registered from here -----------------------------------------------------------
+# -- a toy filter, installed through an entry point --------------------------------------------
 
 
-@dataclass(frozen=True, kw_only=True)
-class ToyParams:
-    """An exponential smoother: ``x = x + alpha (y - x)``."""
-
-    alpha: float = 0.25
-    R: float = 4.0
-
-    def __post_init__(self):
-        if not 0 < number("alpha", self.alpha) < 1:
-            raise ValueError(f"alpha must be in (0, 1), not {self.alpha!r}")
-
-
-TOY_POINTS = {p.name: p for p in (Point("x", "smoothed value (state, output)"),
-                                  Point("e", "innovation y - x", role="operand"),
-                                  Point("a", "the gain alpha", role="operand", constant=True))}
-
-
-def toy_update(ops, k, x, u):
-    e = ops.rq(ops.sub(u["y"], x["x"]), "e")                     # e = y - x
-    xn = ops.rq(ops.add(x["x"], ops.mul(k["a"], e)), "x")        # x = x + alpha e
-    return {"x": xn}, {"x": xn}
-
-
-TOY_VARIANTS = {"steady": Variant("steady", "constant gain alpha", (("x", "x"),),
-                                  lambda p: {"a": Constant(p.alpha, "a", "alpha")}, lambda p: {"x": 0.0}, toy_update)}
-
-
-def toy_reference(params, variant, y):
-    y = np.asarray(y, dtype=np.float64)
-    out, x = np.empty(y.shape), 0.0
-    for n, v in enumerate(y):
-        x += params.alpha * (v - x)
-        out[n] = x
-    return {"x": out}
-
-
-def _toy_run(options, seed):
-    rng = np.random.default_rng(seed)
-    y = np.round(1000 + rng.normal(0, 20, 2000))
-    x = toy_reference(ToyParams(), "steady", y)["x"]
-    noise = float(np.std(x[200:] - 1000) / 20)
-    return {"seed": seed, "noise_ratio": noise}
-
-
-def _toy_claims(options, result, runs):
-    ratios = [run["noise_ratio"] for run in runs]
-    return [Claim("smoothing reduces the noise", "< 1", [r < 1 for r in ratios], spread(ratios))]
-
-
-TOY_EVALUATION = Evaluation(summary="a toy evaluation", description="Smooths a noisy constant.",
-                            add_arguments=lambda p: None, run=_toy_run, claims=_toy_claims,
-                            table=lambda r: f"noise ratio {r['noise_ratio']:.3f}", summary_json=lambda r: r)
-
-TOY = FilterSpec(
-    name="toy",
-    summary="an exponential smoother (a test's own filter)",
-    source="tests/test_plugins.py",
-    params=ToyParams,
-    points=TOY_POINTS,
-    inputs=(("y", "the sample"),),
-    outputs=(Output("x", "x", "the smoothed value"),),
-    variants=TOY_VARIANTS,
-    points_for=lambda params: list(TOY_POINTS),
-    default_formats=lambda params, ranges, *, operand_bits, state_frac: register_formats(
-        TOY, params, ranges, operand_bits=operand_bits, state_frac=state_frac),
-    ranges=lambda params, stimulus=None: float_ranges(
-        TOY, params, list(TOY_VARIANTS.values()), full_scale_stimulus(params.R) if stimulus is None else stimulus),
-    validate=lambda config: None,
-    reference=toy_reference,
-    core=None,  # no parallel core of its own: the folded core runs it
-    goals=lambda config, variant, channels=1: {"logic_cells": 3000, "mul18": 4},
-    default_output="x",
-    random_params=lambda rng: ToyParams(alpha=float(rng.uniform(0.05, 0.9))),
-    evaluation=TOY_EVALUATION,
-)
+TOY_DISTRIBUTION = Path(__file__).parent / "fixtures" / "toy_distribution"
 
 
 @pytest.fixture
-def toy():
-    registry.register(TOY)
+def toy(tmp_path_factory):
+    """The toy filter, installed as a user's distribution would be: its module and a
+    ``.dist-info`` whose ``entry_points.txt`` names it in the ``kfpga.filters`` group, on ``sys.path``."""
+    import shutil
+    import sys
+
+    site = tmp_path_factory.mktemp("site")
+    shutil.copy(TOY_DISTRIBUTION / "kfpga_toy.py", site / "kfpga_toy.py")
+    info = site / "kfpga_toy-1.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: kfpga-toy\nVersion: 1.0\n")
+    (info / "entry_points.txt").write_text(f"[{registry.GROUP}]\ntoy = kfpga_toy:SPEC\n")
+    sys.path.insert(0, str(site))
+    registry.reload()
     try:
-        yield TOY
+        assert "toy" in registry.names()
+        yield registry.get("toy")
     finally:
-        registry.unregister(TOY.name)
+        sys.path.remove(str(site))
+        sys.modules.pop("kfpga_toy", None)
+        registry.reload()
+        assert "toy" not in registry.names()
 
 
 def test_a_toy_filter_gets_the_generic_commands(toy, tmp_path, capsys, seed):
@@ -217,7 +153,7 @@ def test_a_toy_filter_gets_the_generic_commands(toy, tmp_path, capsys, seed):
 def test_a_toy_filter_passes_the_contract(toy, tmp_path, seed):
     from tests.contract import test_contract as contract
 
-    assert TOY.architectures("steady", ToyParams()) == ("folded",)
+    assert toy.architectures("steady", toy.params()) == ("folded",)
     contract.test_model_equals_the_exact_rational_spec("toy", "steady", seed)
     for channels in (1, 3):
         contract.test_rtl_equals_model_with_backpressure("toy", "steady", "folded", channels, seed)

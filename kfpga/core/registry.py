@@ -1,4 +1,6 @@
-"""The registered filters. Adding a filter adds its files and one line to :data:`FILTERS`.
+"""The registered filters: every installed distribution's entry points in the ``kfpga.filters``
+group, each ``NAME = "module:SPEC"`` naming the filter's :class:`~kfpga.core.spec.FilterSpec`
+(kfpga's own in ``pyproject.toml``). Adding a filter adds its files and one entry point.
 
 Every command (``--filter NAME``), the manifest, the scoreboard, the cocotb benches and the
 contract tests iterate over this registry; nothing else lists the filters.
@@ -6,27 +8,51 @@ contract tests iterate over this registry; nothing else lists the filters.
 
 from __future__ import annotations
 
-import importlib
+from importlib import metadata
 
-__all__ = ["FILTERS", "DEFAULT", "get", "names", "specs", "spec_for", "register", "unregister", "aliases",
-           "canonical", "presets", "preset",
-           "coasting", "example"]
+from kfpga.core.spec import resolve
 
-#: ``name -> module`` whose ``SPEC`` is the filter's :class:`~kfpga.core.spec.FilterSpec`; imported on
-#: use. The name is the stem of the filter's files in every layer (``model/NAME.py``, ``hw/NAME.py``,
-#: its tests); a spec's ``aliases`` are the other spellings users type.
-FILTERS = {
-    "kalman2": "kfpga.model.kalman2",
-    "kalman": "kfpga.model.kalman",
-    "alphabeta": "kfpga.model.alphabeta",
-    "tukey53h": "kfpga.model.tukey53h",
-    "roll": "kfpga.model.roll",
-    "lsfront": "kfpga.model.lsfront",
-}
+__all__ = ["GROUP", "DEFAULT", "get", "names", "specs", "spec_for", "register", "unregister", "aliases", "canonical",
+           "presets", "preset", "coasting", "example", "reload"]
+
+#: The entry-point group a distribution registers its filters in.
+GROUP = "kfpga.filters"
 #: The paper's filter, used when a config or command names none.
 DEFAULT = "kalman2"
 
-_loaded = {}
+_targets = None  # name -> "module:attribute" of the installed filters, in the order they are found
+_loaded = {}  # name -> FilterSpec: the specs imported so far, and those added by register()
+_added = set()  # the names register() added
+
+
+def _installed():
+    """``{name: "module:attribute"}`` of the entry points: the default filter, kfpga's other
+    filters by name, then other distributions' by distribution and name."""
+    global _targets
+    if _targets is None:
+        def order(ep):
+            dist = ep.dist.name if ep.dist is not None else ""
+            return ep.name != DEFAULT, dist != "kfpga", dist, ep.name
+
+        found = sorted(metadata.entry_points(group=GROUP), key=order)
+        _targets = {}
+        for ep in found:
+            if ep.name in _targets and _targets[ep.name] != ep.value:
+                raise RuntimeError(f"two installed filters are named {ep.name!r}: {_targets[ep.name]} and {ep.value}")
+            _targets[ep.name] = ep.value
+        if DEFAULT not in _targets:
+            raise RuntimeError(f"no {GROUP!r} entry point names the {DEFAULT} filter: kfpga is not installed "
+                               "(pip install -e .)")
+    return _targets
+
+
+def reload():
+    """Read the entry points again (a distribution installed or put on ``sys.path`` since); the
+    filters added by :func:`register` stay."""
+    global _targets
+    _targets = None
+    for name in [n for n in _loaded if n not in _added]:
+        del _loaded[name]
 
 
 def register(spec):
@@ -36,18 +62,23 @@ def register(spec):
         if name in taken:
             raise ValueError(f"a filter named {name!r} is already registered")
     _loaded[spec.name] = spec
+    _added.add(spec.name)
 
 
 def unregister(name):
-    """Remove a filter added with :func:`register` (the registry's own filters stay)."""
-    if name in FILTERS:
-        raise ValueError(f"{name!r} is one of the registry's own filters")
+    """Remove a filter added with :func:`register` (the installed filters stay)."""
+    if name in _installed():
+        raise ValueError(f"{name!r} is an installed filter (an entry point of {GROUP!r})")
     _loaded.pop(name, None)
+    _added.discard(name)
 
 
 def _load(name):
     if name not in _loaded:
-        _loaded[name] = importlib.import_module(FILTERS[name]).SPEC
+        spec = resolve(_installed()[name])
+        if spec.name != name:
+            raise RuntimeError(f"the entry point {name!r} of {GROUP!r} names the spec of {spec.name!r}")
+        _loaded[name] = spec
     return _loaded[name]
 
 
@@ -58,7 +89,7 @@ def aliases():
 
 def canonical(name):
     """The registered name of ``name`` (itself, or the filter it is an alias of); ``KeyError``."""
-    if name in _loaded or name in FILTERS:
+    if name in _loaded or name in _installed():
         return name
     known = aliases()
     if name in known:
@@ -73,7 +104,7 @@ def get(name):
 
 
 def names():
-    return list(dict.fromkeys([*FILTERS, *_loaded]))
+    return list(dict.fromkeys([*_installed(), *_added]))
 
 
 def specs():

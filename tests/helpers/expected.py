@@ -2,6 +2,6 @@
 that the tests of its messages fail when a filter goes missing or comes in unannounced."""
 
 #: The registered filters, in registry order.
-FILTERS = ("kalman2", "kalman", "alphabeta", "tukey53h", "roll", "lsfront")
+FILTERS = ("kalman2", "alphabeta", "kalman", "lsfront", "roll", "tukey53h")
 #: As the error messages list them.
 REGISTERED = ", ".join(FILTERS)
