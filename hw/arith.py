@@ -2,10 +2,10 @@
 
 :class:`AmaranthOps` runs the same stage functions as the model (``kfpga/core/ops.py``) and builds
 their combinational logic in a module. The alignment and multiplier rules come from
-:class:`~kfpga.core.ops.Ops`; this module supplies Amaranth's operators and :func:`requantize`, the
+:class:`~kfpga.core.ops.Ops`; this module supplies Amaranth's operators and :func:`requantise`, the
 one place where bits are dropped. Amaranth widens ``+``, ``-`` and ``*`` to hold every result,
 so nothing wraps before the explicit quantisation, which saturates (or wraps) and raises a
-flag exactly as :func:`kfpga.core.fixed.requantize` does.
+flag exactly as :func:`kfpga.core.fixed.requantise` does.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from amaranth import Cat, Const, Mux, Signal, signed
 from kfpga.core.fixed import Overflow, Rounding
 from kfpga.core.ops import Ops, const_width
 
-__all__ = ["AmaranthOps", "any_flag", "live_flags", "requantize"]
+__all__ = ["AmaranthOps", "any_flag", "live_flags", "requantise"]
 
 #: The flag of a write that cannot overflow: a constant, so that no register, OR gate or output
 #: bit is built for it (a register that always holds 0 is logic no test can check).
@@ -58,7 +58,7 @@ def _round_addend(value, shift, rounding):
     return sign.replicate(shift)  # FIX
 
 
-def requantize(m, value, src_frac, fmt, *, name, cannot_overflow=False):
+def requantise(m, value, src_frac, fmt, *, name, cannot_overflow=False):
     """Write ``value * 2**-src_frac`` into ``fmt``: returns ``(result, overflowed)`` signals.
 
     ``result`` is a ``signed(fmt.width)`` signal, driven combinationally in ``m``, and
@@ -147,7 +147,7 @@ class AmaranthOps(Ops):
 
     def _rq(self, raw, src_frac, fmt, name):
         safe = self.overflow_sites is not None and name not in self.overflow_sites
-        return requantize(self.m, raw, src_frac, fmt, name=f"{self.prefix}{name}", cannot_overflow=safe)
+        return requantise(self.m, raw, src_frac, fmt, name=f"{self.prefix}{name}", cannot_overflow=safe)
 
     def _div(self, num, den, shift, fmt, name):
         raise NotImplementedError(

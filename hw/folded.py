@@ -26,7 +26,7 @@ from amaranth import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from kfpga.core.board import MAX_SENSORS
+from kfpga.core.board import MAX_CHANNELS
 from kfpga.hw.core import Core
 from kfpga.hw.microcode import BEGIN, DIGIT, END, FLAGS, HI, LO, OR, OUT, READ_LATENCY, WORD, compile_update, handshake_twin
 from kfpga.hw.storage import check_channels, m4k_blocks
@@ -137,7 +137,7 @@ class FoldedCore(Core):
         filter reset, and its counters read; ``None``: none, every constant built in.
     """
 
-    max_channels = MAX_SENSORS
+    max_channels = MAX_CHANNELS
 
     def __init__(self, config, variant, *, channels=1, program=None, missing=False, bus=None):
         from kfpga.hw.layouts import channel_bits

@@ -15,7 +15,7 @@ from typing import ClassVar
 from amaranth import Cat, Const, Module, Mux, Signal, signed
 
 from kfpga.core.ads8364 import CODE_FORMAT
-from kfpga.core.board import MAX_SENSORS
+from kfpga.core.board import MAX_CHANNELS
 from kfpga.core.ops import Fx, divider_shift, quotient_bits
 from kfpga.hw.arith import live_flags
 from kfpga.hw.core import Core, LoopPipeline, write_estimate
@@ -127,7 +127,7 @@ class SteadyCore(LoopPipeline):
     :class:`~kfpga.hw.cvloop.ConstantGainLoop`; the input word has one field per observation.
     """
 
-    max_channels = MAX_SENSORS  # past eight, the states in block memory (LoopPipeline)
+    max_channels = MAX_CHANNELS  # past eight, the states in block memory (LoopPipeline)
 
     steps = (_predict_operands, _predict_terms, _predict_sums, _predict_round, _observe, _products, _correct)
     reads = ({f"x{i}" for i in _ALL}, {f"x{i}" for i in _ALL} | {f"xo{i}" for i in _ALL},

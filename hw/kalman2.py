@@ -17,7 +17,7 @@ from __future__ import annotations
 from amaranth import Cat, Module, Mux, Signal, signed
 
 from kfpga.core.ads8364 import CODE_FORMAT
-from kfpga.core.board import MAX_SENSORS
+from kfpga.core.board import MAX_CHANNELS
 from kfpga.core.ops import Fx, divider_shift, quotient_bits
 from kfpga.hw.arith import NO_OVERFLOW, any_flag, live_flags
 from kfpga.hw.core import Core, write_estimate
@@ -35,7 +35,7 @@ class SteadyCore(ConstantGainLoop):
     (:class:`~kfpga.hw.cvloop.ConstantGainLoop`) with the gains ``K1`` and ``T*K2``; see there for
     the pipeline and the stream contract."""
 
-    max_channels = MAX_SENSORS  # past eight, the states in block memory (LoopPipeline)
+    max_channels = MAX_CHANNELS  # past eight, the states in block memory (LoopPipeline)
 
 
 class FullCore(Core):

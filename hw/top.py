@@ -190,10 +190,10 @@ def out_width(config, name=None):
 
 def check_sensors(sensors, config, *, six_channel=False, prefilter=None):
     """``sensors`` checked for a design with this config (``ValueError`` naming the problem)."""
-    from kfpga.core.board import MAX_SENSORS
+    from kfpga.core.board import MAX_CHANNELS
 
-    if not isinstance(sensors, int) or isinstance(sensors, bool) or not 1 <= sensors <= MAX_SENSORS:
-        raise ValueError(f"sensors must be an integer 1..{MAX_SENSORS}, not {sensors!r}")
+    if not isinstance(sensors, int) or isinstance(sensors, bool) or not 1 <= sensors <= MAX_CHANNELS:
+        raise ValueError(f"sensors must be an integer 1..{MAX_CHANNELS}, not {sensors!r}")
     if sensors > 1:
         if six_channel:
             raise ValueError("sensors on a multiplexer take one ADC channel: not with six channels")

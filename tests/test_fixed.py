@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from fxpmath import Fxp
 
-from kfpga.core.fixed import Overflow, QFormat, Rounding, bits_for, requantize, shift_round, to_raw
+from kfpga.core.fixed import Overflow, QFormat, Rounding, bits_for, requantise, shift_round, to_raw
 
 # -- the format type ---------------------------------------------------------------------
 
@@ -119,19 +119,19 @@ OVERFLOW_TABLE = [
 def test_overflow_table(value, sat, wrap, flag):
     for overflow, expected in ((Overflow.SATURATE, sat), (Overflow.WRAP, wrap)):
         fmt = Q4_0.with_rules(overflow=overflow)
-        assert requantize(value, 0, fmt) == (expected, flag)
-        out, f = requantize(np.array([value]), 0, fmt)
+        assert requantise(value, 0, fmt) == (expected, flag)
+        out, f = requantise(np.array([value]), 0, fmt)
         assert (out[0], bool(f[0])) == (expected, flag)
 
 
 def test_most_negative_value_rounds_and_saturates():
     # -8.5 in Q4.1 (raw -17) into Q4.0: floor gives -9 -> saturates to -8; half up gives -8 exactly
     fmt = QFormat(4, 0)
-    assert requantize(-17, 1, fmt.with_rules(rounding=Rounding.FLOOR)) == (-8, True)
-    assert requantize(-17, 1, fmt.with_rules(rounding=Rounding.HALF_UP)) == (-8, False)
+    assert requantise(-17, 1, fmt.with_rules(rounding=Rounding.FLOOR)) == (-8, True)
+    assert requantise(-17, 1, fmt.with_rules(rounding=Rounding.HALF_UP)) == (-8, False)
     # 7.5 (raw 15 in Q4.1): floor 7 fits, half up 8 overflows
-    assert requantize(15, 1, fmt.with_rules(rounding=Rounding.FLOOR)) == (7, False)
-    assert requantize(15, 1, fmt.with_rules(rounding=Rounding.HALF_UP)) == (7, True)
+    assert requantise(15, 1, fmt.with_rules(rounding=Rounding.FLOOR)) == (7, False)
+    assert requantise(15, 1, fmt.with_rules(rounding=Rounding.HALF_UP)) == (7, True)
 
 
 def test_to_raw_rounds_constants():
@@ -166,12 +166,12 @@ def random_requantisations(rng, rounding, overflow, count=5000, cases=20):
 
 @pytest.mark.parametrize("overflow", ["saturate", "wrap"])
 @pytest.mark.parametrize("rounding", sorted(FXPMATH))
-def test_requantize_matches_fxpmath(rounding, overflow, seed):
+def test_requantise_matches_fxpmath(rounding, overflow, seed):
     rng = np.random.default_rng(seed)
     mode, add_half = FXPMATH[rounding]
     for raw, src_frac, fmt in random_requantisations(rng, rounding, overflow):
         values = raw.astype(np.float64) * 2.0 ** -src_frac
-        ours, flags = requantize(raw.astype(np.int64), src_frac, fmt)
+        ours, flags = requantise(raw.astype(np.int64), src_frac, fmt)
         shifted = values + (fmt.lsb / 2 if add_half and src_frac > fmt.frac_bits else 0.0)
         ref = Fxp(shifted, signed=True, n_word=fmt.width, n_frac=fmt.frac_bits, rounding=mode, overflow=overflow)
         np.testing.assert_array_equal(ours, ref.val.astype(np.int64), err_msg=f"{fmt} from frac {src_frac}")
@@ -181,12 +181,12 @@ def test_requantize_matches_fxpmath(rounding, overflow, seed):
         np.testing.assert_array_equal(flags, expected_flags)
         # the int path agrees with the array path
         for r, o, fl in zip(raw[:300].tolist(), ours[:300].tolist(), flags[:300].tolist(), strict=True):
-            assert requantize(r, src_frac, fmt) == (o, fl)
+            assert requantise(r, src_frac, fmt) == (o, fl)
 
 
 @pytest.mark.parametrize("overflow", ["saturate", "wrap"])
 @pytest.mark.parametrize("rounding", MODES)
-def test_requantize_matches_apytypes(rounding, overflow, seed):
+def test_requantise_matches_apytypes(rounding, overflow, seed):
     apy = pytest.importorskip("apytypes")
     rng = np.random.default_rng(seed)
     quantization = getattr(apy.QuantizationMode, APYTYPES[rounding])
@@ -198,7 +198,7 @@ def test_requantize_matches_apytypes(rounding, overflow, seed):
         bits = np.asarray(src.cast(int_bits=fmt.int_bits, frac_bits=fmt.frac_bits, quantization=quantization,
                                    overflow=wrap).to_bits()).astype(np.int64)
         ref = bits - ((bits >> (fmt.width - 1)) << fmt.width)  # two's complement back to signed
-        ours, _ = requantize(raw.astype(np.int64), src_frac, fmt)
+        ours, _ = requantise(raw.astype(np.int64), src_frac, fmt)
         np.testing.assert_array_equal(ours, ref, err_msg=f"{rounding} {fmt} from frac {src_frac}")
 
 

@@ -80,3 +80,16 @@ def test_the_source_documents_are_cited_by_their_references():
     assert offenders == [], offenders
     keys = set(re.findall(r"\*\*\[(\w+)\]\*\*", (ROOT / "docs" / "references.md").read_text()))
     assert keys == {"Zhong", "Zhang", "Lu", "Fukuda", "Chen"}
+
+
+def test_quantise_is_spelled_one_way():
+    """The glossary's spelling (quantise, quantisation) in the package, the docs and the README;
+    the only others are the arguments of apytypes, the oracle the tests compare with."""
+    import re
+
+    spelled = re.compile("quanti" + "z", re.IGNORECASE)  # in two parts so that this file does not match itself
+    paths = [p for folder in ("kfpga", "model", "hw", "sim", "docs") for p in sorted((ROOT / folder).rglob("*"))
+             if p.suffix in (".py", ".md")] + [ROOT / "README.md"]
+    offenders = [f"{p.relative_to(ROOT)}:{n}" for p in paths for n, line in enumerate(p.read_text().splitlines(), 1)
+                 if spelled.search(line)]
+    assert offenders == [], offenders

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from kfpga.cli import main
-from kfpga.core.board import MAX_SENSORS, Board
+from kfpga.core.board import MAX_CHANNELS, Board
 from kfpga.core.config import FilterConfig
 from kfpga.core.fixedmodel import FixedModel
 from kfpga.hw.top import port_widths
@@ -47,7 +47,7 @@ def test_port_widths_follow_the_sensors():
     for n, sel, channel in [(2, 1, 3), (6, 3, 3), (8, 3, 3), (9, 4, 4), (64, 6, 6), (65, 7, 7), (256, 8, 8)]:
         widths = port_widths(n)
         assert (widths["mux_sel"][1], widths["out_channel"][1]) == (sel, channel), n
-    assert MAX_SENSORS == 256
+    assert MAX_CHANNELS == 256
 
 
 def test_the_timer_converts_each_sensor_at_the_rate():

@@ -305,14 +305,14 @@ def add_design_args(p, channels_help):
 
 def channels_type(text):
     """``--channels``: 1 (one ADC channel), 6 (the six) or 2..256 sensors on a multiplexer."""
-    from kfpga.core.board import MAX_SENSORS
+    from kfpga.core.board import MAX_CHANNELS
 
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"must be an integer 1..{MAX_SENSORS}, not {text!r}") from None
-    if not 1 <= value <= MAX_SENSORS:
-        raise argparse.ArgumentTypeError(f"must be an integer 1..{MAX_SENSORS}, not {value}")
+        raise argparse.ArgumentTypeError(f"must be an integer 1..{MAX_CHANNELS}, not {text!r}") from None
+    if not 1 <= value <= MAX_CHANNELS:
+        raise argparse.ArgumentTypeError(f"must be an integer 1..{MAX_CHANNELS}, not {value}")
     return value
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-__all__ = ["SYSTEM_MHZ", "SYSTEM_PERIOD_NS", "WORST_PATH_GOAL_NS", "Board", "CONVERSION_PERIODS", "MAX_SENSORS",
+__all__ = ["SYSTEM_MHZ", "SYSTEM_PERIOD_NS", "WORST_PATH_GOAL_NS", "Board", "CONVERSION_PERIODS", "MAX_CHANNELS",
            "sensor_bits"]
 
 #: The 50 MHz oscillator of the paper's board ([Zhong], section 4.1): the one clock domain.
@@ -24,8 +24,9 @@ WORST_PATH_GOAL_NS = round(1000.0 / (1.25 * SYSTEM_MHZ), 2)
 #: channel every 230 system cycles (measured on the controller).
 CONVERSION_PERIODS = {1: 23, 6: 38}
 
-#: Sensors an analog multiplexer in front of one ADC channel may feed (the core's channel states).
-MAX_SENSORS = 256
+#: The most sensors an analog multiplexer in front of one ADC channel feeds, one channel state of the
+#: core each (``--channels``); a filter's core may hold more (the alpha-beta tracker's tracks).
+MAX_CHANNELS = 256
 
 
 def sensor_bits(sensors):

@@ -5,7 +5,7 @@ A value in format ``Q(i, f)`` is a signed two's-complement integer ``raw`` of ``
 
 Every quantisation point of the datapath is a :class:`QFormat`: the format plus the rounding
 rule used when fraction bits are dropped and the overflow rule used when the result does not
-fit. :func:`requantize` applies both to exact integers; ``hw/arith.py`` builds the same
+fit. :func:`requantise` applies both to exact integers; ``hw/arith.py`` builds the same
 operation in Amaranth and ``kfpga/core/compiled.py`` writes it into the model's compiled loops, so
 the model and the RTL produce identical integers.
 
@@ -25,7 +25,7 @@ from enum import StrEnum
 
 import numpy as np
 
-__all__ = ["Rounding", "Overflow", "QFormat", "round_addend", "shift_round", "requantize", "to_raw", "bits_for"]
+__all__ = ["Rounding", "Overflow", "QFormat", "round_addend", "shift_round", "requantise", "to_raw", "bits_for"]
 
 class Rounding(StrEnum):
     """How fraction bits are dropped, named as MATLAB's fixed-point tools name them.
@@ -191,7 +191,7 @@ def shift_round(raw, shift, rounding):
     return (raw + round_addend(raw, shift, rounding)) >> shift
 
 
-def requantize(raw, src_frac, fmt):
+def requantise(raw, src_frac, fmt):
     """Write the exact value ``raw * 2**-src_frac`` into ``fmt``.
 
     Returns ``(raw_out, overflowed)``; for arrays, ``overflowed`` is a boolean array.
@@ -225,7 +225,7 @@ def to_raw(value, fmt):
         exact = int(np.floor(v * 2.0 ** (fmt.frac_bits + guard)))
         # floor() of an already-integral scaled float is exact; any sub-unit part is far below
         # the rounding position, so floor here never changes the result of the final rounding
-        return requantize(exact, fmt.frac_bits + guard, fmt)
+        return requantise(exact, fmt.frac_bits + guard, fmt)
     out = [to_raw(v, fmt) for v in np.ravel(value)]
     raws = np.array([r for r, _ in out], dtype=np.int64).reshape(np.shape(value))
     flags = np.array([f for _, f in out], dtype=bool).reshape(np.shape(value))

@@ -43,7 +43,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from kfpga.core.fixed import Overflow, QFormat, Rounding, requantize, to_raw
+from kfpga.core.fixed import Overflow, QFormat, Rounding, requantise, to_raw
 
 __all__ = ["Fx", "Ops", "IntOps", "FloatOps", "WidthOps", "FractionOps", "CostOps", "update_cost", "Intermediate",
            "ExactCast", "WidthReport", "update_widths", "divider_shift",
@@ -416,13 +416,13 @@ def square_root(raw, shift, limit):
 class IntOps(Ops):
     """The bit-accurate integers: payloads are Python ints (one channel) or int64 arrays (a batch).
 
-    Every write goes through :func:`kfpga.core.fixed.requantize`; this backend is the plain,
+    Every write goes through :func:`kfpga.core.fixed.requantise`; this backend is the plain,
     unoptimised statement of the integer model (``kfpga/core/compiled.py`` is its fast form, and
     the tests hold the two equal).
     """
 
     def _rq(self, raw, src_frac, fmt, name):
-        return requantize(raw, src_frac, fmt)
+        return requantise(raw, src_frac, fmt)
 
     def _div(self, num, den, shift, fmt, name):
         return divide(num, den, shift, quotient_bits(fmt))

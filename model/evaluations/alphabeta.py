@@ -117,7 +117,7 @@ def _tracker(params, z):
     return (out["x"], out["v"]), (fixed["x"], fixed["v"])
 
 
-def alpha_beta(scenario=None, *, seed):
+def alphabeta(scenario=None, *, seed):
     """Run the evaluation; a dict of the scenario, the rows (each filter's figures), the operation
     counts and the series the plot draws."""
     from dataclasses import replace
@@ -195,7 +195,7 @@ def _tested(rows):
     return next(r for r in rows if r["filter"] in ("alpha-beta (paper)", "alpha-beta (yours)"))
 
 
-def alpha_beta_table(result):
+def alphabeta_table(result):
     """The report of one seed: each filter's figures and the operation counts."""
     s = result["scenario"]
     lines = [f"seed {result['seed']}: {s['targets']} targets, {s['scans']} scans, noise {s['sigma']:g} px per axis, "
@@ -223,7 +223,7 @@ def alpha_beta_table(result):
     return "\n".join(lines)
 
 
-def alpha_beta_claims(options, result, runs):
+def alphabeta_claims(options, result, runs):
     """The paper's claims, judged on every seed's rows."""
     from kfpga.core.claims import Claim, spread
 
@@ -285,7 +285,7 @@ def alpha_beta_claims(options, result, runs):
     ]
 
 
-def alpha_beta_plot(result, path):
+def alphabeta_plot(result, path):
     """The paper's figures: the tracks (truth, plots, filtered), and the position error against time."""
     from kfpga.core.plots import pyplot, save_figure
 
@@ -348,7 +348,7 @@ def _check(options):
 
 
 def _run(options, seed):
-    return alpha_beta(_scenario(options), seed=seed)
+    return alphabeta(_scenario(options), seed=seed)
 
 
 EVALUATION = Evaluation(
@@ -362,8 +362,8 @@ EVALUATION = Evaluation(
     add_arguments=_add_arguments,
     check=_check,
     run=_run,
-    table=alpha_beta_table,
+    table=alphabeta_table,
     summary_json=lambda r: {k: r[k] for k in ("seed", "scenario", "rows", "costs")},
-    claims=alpha_beta_claims,
-    plot=alpha_beta_plot,
+    claims=alphabeta_claims,
+    plot=alphabeta_plot,
 )

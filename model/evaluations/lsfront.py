@@ -86,7 +86,7 @@ def equal_suppression_q(v, truth, t, s, params, target):
     return 10.0 ** ((lo + hi) / 2.0)
 
 
-def ls_frontend(scenario=None, *, seed, params=None):
+def lsfront(scenario=None, *, seed, params=None):
     """The patent's four curves on the deceleration scenario, and the velocity-only filter at the
     LS-fed one's noise suppression: ``{seed, scenario, params, rows, series, ...}``."""
     from dataclasses import replace
@@ -97,7 +97,7 @@ def ls_frontend(scenario=None, *, seed, params=None):
     params = ls.LSFrontParams(T=s.T, r=s.sigma_v ** 2) if params is None else params
     t, truth, v, a = deceleration_log(s, seed)
     fed = ls.lsfront(v, params)
-    fixed = ls_frontend_fixed(v, params)
+    fixed = lsfront_fixed(v, params)
     fed_cruise = _figures("", fed["velocity"], truth, t, s)["rmse_cruise"]
     q_equal = equal_suppression_q(v, truth, t, s, params, fed_cruise)
     both = ls.kalman_va(v, params, a=a, r_a=s.sigma_a ** 2)["velocity"]
@@ -131,7 +131,7 @@ SWITCHED = "LS-fed, a steady-state gain per mode (float)"
 BIT_ACCURATE = "LS-fed, bit-accurate (the core's integers)"
 
 
-def ls_frontend_fixed(v, params):
+def lsfront_fixed(v, params):
     """The front end in the core's integers on the speed log ``v`` (m/s, ADC codes of
     ``params.lsb``) and the same switched steady-state filter in float: both estimates (m/s),
     their distance, the formats, the overflowed samples and the samples whose window differs."""
@@ -156,7 +156,7 @@ def ls_frontend_fixed(v, params):
                       for n, k in ls.mode_gains(params).items()}}
 
 
-def ls_frontend_table(result):
+def lsfront_table(result):
     s = result["scenario"]
     table = ", ".join(f"|innovation| < {t:g}: {n}" for t, n in result["params"]["table"])
     lines = [f"seed {result['seed']}: {s['v0']:g} m/s, decelerating at {s['decel']:g} m/s^2 from {s['t0']:g} s to a stop "
@@ -176,12 +176,12 @@ def ls_frontend_table(result):
               f"error averaged over {s['average']} samples (m/s). Samples per window Ns (0: raw velocity, m = 1): {used}",
               f"velocity only, equal suppression: q = {result['params']['q_equal_suppression']:.3g} (the patent's filter's "
               f"q = {result['params']['q']:g}), chosen so that its RMSE at constant speed equals the LS-fed filter's.",
-              "", ls_frontend_fixed_text(result["fixed"]), "",
+              "", lsfront_fixed_text(result["fixed"]), "",
               "the patent gives curves, not figures; the scenario's numbers (speed, rate, noise) are this code's own."]
     return "\n".join(lines)
 
 
-def ls_frontend_fixed_text(fixed):
+def lsfront_fixed_text(fixed):
     gains = "; ".join(f"{mode}: K = {k}".replace("], [", "; ") for mode, k in
                       ((m, [[round(g, 4) for g in row] for row in k]) for m, k in fixed["gains"].items()))
     return (f"fixed point (the core's integers; formats {', '.join(f'{k} {v}' for k, v in fixed['formats'].items())}): "
@@ -192,7 +192,7 @@ def ls_frontend_fixed_text(fixed):
             f"{fixed['samples']} samples. Its steady-state gains (velocity, acceleration per sample) per mode: {gains}.")
 
 
-def ls_frontend_claims(options, result, runs):
+def lsfront_claims(options, result, runs):
     """The patent's claims, judged on every seed (and, for the window, over three noise levels)."""
     from kfpga.core.claims import Claim, spread
 
@@ -258,7 +258,7 @@ def _window_by_noise(options, seed):
     return out
 
 
-def ls_frontend_plot(result, path):
+def lsfront_plot(result, path):
     """The patent's fig. 4: the velocity estimates through the deceleration, and their errors."""
     from kfpga.core.plots import pyplot, save_figure
 
@@ -321,7 +321,7 @@ def _params(options, scenario):
 
 def _run(options, seed):
     scenario = _scenario(options)
-    return ls_frontend(scenario, seed=seed, params=_params(options, scenario)) | {
+    return lsfront(scenario, seed=seed, params=_params(options, scenario)) | {
         "window_by_noise": _window_by_noise(options, seed)}
 
 
@@ -337,9 +337,9 @@ EVALUATION = Evaluation(
     add_arguments=_add_arguments,
     check=lambda options: _params(options, _scenario(options)),
     run=_run,
-    table=ls_frontend_table,
+    table=lsfront_table,
     summary_json=lambda r: {k: r[k] for k in ("seed", "scenario", "params", "rows", "windows", "mean_window", "fixed",
                                               "window_by_noise")},
-    claims=ls_frontend_claims,
-    plot=ls_frontend_plot,
+    claims=lsfront_claims,
+    plot=lsfront_plot,
 )
