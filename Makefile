@@ -18,11 +18,11 @@ venv: $(STAMP)
 # the fast tier: lint (ruff and the import contracts) with the unit and model tests, no simulator
 # and no synthesis (about 1 minute on 2 cores; tests/conftest.py lists its files)
 check: $(STAMP)
-	$(BIN)/python -m tests.helpers.layers
+	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -n auto -m check
 
 test: $(STAMP)
-	$(BIN)/python -m tests.helpers.layers
+	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -n auto --dist loadgroup -m "not models and not long"
 
 # the long tier: the slowest runs (the roll predictor's 12,000-cycle updates on the folded core,

@@ -23,24 +23,10 @@ def test_no_per_line_lint_exemptions():
 
 
 def test_layers_import_only_downward():
-    """The import-linter contracts of pyproject.toml, over the package as it installs: each layer
-    imports only the layers below it."""
-    from tests.helpers.layers import lint_imports
-
-    code, text = lint_imports()
-    assert code == 0, text
-    assert "1 kept, 0 broken" in text
-
-
-def test_each_file_is_seen_once():
-    """No link in the repository: a tool that walks it (pytest, coverage, grep, ruff) finds each
-    file at one path; hw/, model/ and sim/ are installed into the package by pyproject.toml."""
-    links = [str(p.relative_to(ROOT)) for folder in ("kfpga", "model", "hw", "sim", "tests", "docs", "bench", "examples",
-                                                      "constraints") for p in (ROOT / folder).rglob("*") if p.is_symlink()]
-    assert links == []
-    from kfpga.verify.srcmutate import package_dirs
-
-    assert set(package_dirs(ROOT).values()) == {"model", "hw", "sim", "constraints"}
+    """The import-linter contracts of pyproject.toml: each layer imports only the layers below it."""
+    lint = shutil.which("lint-imports") or str(Path(sys.executable).with_name("lint-imports"))
+    result = subprocess.run([lint, "--no-cache"], capture_output=True, text=True, cwd=ROOT)
+    assert result.returncode == 0, result.stdout + result.stderr
 
 
 def long_functions(paths, root=ROOT):

@@ -306,9 +306,7 @@ def _tree_digest(tree, pool):
 
 
 def copy_tree(src, dst):
-    """A copy of the source tree to write mutants into (the working tree is never changed), laid
-    out as the package installs: ``kfpga/hw`` and the other folders ``pyproject.toml`` maps into
-    the package are links in the copy, so that its ``PYTHONPATH`` imports the mutants."""
+    """A copy of the source tree to write mutants into (the working tree is never changed)."""
     if dst.exists():
         shutil.rmtree(dst)
     dst.mkdir(parents=True)
@@ -318,20 +316,7 @@ def copy_tree(src, dst):
             shutil.copytree(s, dst / name, symlinks=True, ignore=shutil.ignore_patterns("__pycache__", "build"))
         else:
             shutil.copy2(s, dst / name)
-    for package, folder in package_dirs(dst).items():
-        link = dst.joinpath(*package.split("."))
-        if not link.exists():
-            link.symlink_to(Path(*[".."] * (len(package.split(".")) - 1), folder), target_is_directory=True)
     return dst
-
-
-def package_dirs(root):
-    """``{package: folder}`` of the top-level folders ``pyproject.toml`` installs into the
-    ``kfpga`` package (``kfpga.hw: hw``, ...)."""
-    import tomllib
-
-    table = tomllib.loads((Path(root) / "pyproject.toml").read_text())["tool"]["setuptools"]["package-dir"]
-    return {package: folder for package, folder in table.items() if package != folder}
 
 
 # -- equivalence ------------------------------------------------------------------------------------
