@@ -38,7 +38,7 @@ def model_files(only=None):
 
 
 def variants(config):
-    return [name for name, v in config.spec.variants.items() if v.applies(config.params) is None]
+    return [name for name, v in config.spec.model.variants.items() if v.applies(config.params) is None]
 
 
 def proposed(path, config, *, samples, reuse):
@@ -46,7 +46,7 @@ def proposed(path, config, *, samples, reuse):
     out = path.with_name(path.stem + ".proposed.toml")
     if reuse and out.exists():
         return FilterConfig.from_toml(out), None
-    scenario = config.spec.scenarios[0]
+    scenario = config.spec.model.scenarios[0]
     runs = [scenarios.for_config(scenario, samples, s, config) for s in SEARCH_SEEDS]
     ys = [y for _, y in runs]
     codes = {k: np.stack([y[k] for y in ys]) for k in ys[0]} if isinstance(ys[0], dict) else np.stack(ys)
@@ -62,7 +62,7 @@ def proposed(path, config, *, samples, reuse):
 
 def unseen(config, variant):
     """The fixed RMSE over float's, one ratio per unseen seed."""
-    scenario = config.spec.scenarios[0]
+    scenario = config.spec.model.scenarios[0]
     out = []
     for seed in UNSEEN_SEEDS:
         truth, y = scenarios.for_config(scenario, 20000, seed, config)

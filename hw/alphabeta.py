@@ -133,8 +133,14 @@ class TrackerCore(wiring.Component):
         return m
 
 
-def make_core(config, variant, *, channels=1, stages=None):
-    """The alpha-beta loop with ``channels`` states (the registry's core; ``stages`` default 4)."""
+def make_core(config, variant, *, channels=1, stages=None, tracks=None):
+    """The alpha-beta loop with ``channels`` states (the registry's core; ``stages`` default 4), or
+    with ``tracks`` the many-track core (:class:`TrackerCore`, two states a track)."""
     if variant != "steady":
         raise ValueError(f"variant must be 'steady' (the alpha-beta tracker has constant gains), not {variant!r}")
-    return SteadyCore(config, channels=channels, stages=4 if stages is None else stages)
+    stages = 4 if stages is None else stages
+    if tracks is not None:
+        if channels != 1:
+            raise ValueError(f"a tracker's states are two a track: channels does not apply with tracks ({channels})")
+        return TrackerCore(config, tracks=tracks, stages=stages)
+    return SteadyCore(config, channels=channels, stages=stages)

@@ -83,7 +83,7 @@ class Core(wiring.Component):
         self.channels = channels
         self.constants = config.constants(variant)
         self.reset_state = config.reset_state(variant)
-        self.state_points = dict(config.spec.variants[variant].state_for(config.params))
+        self.state_points = dict(config.spec.model.variants[variant].state_for(config.params))
         super().__init__({
             "i": In(stream.Signature(input_layout(config, channels, index_bits, missing=missing))),
             "o": Out(stream.Signature(output_layout(config, channels, index_bits))),

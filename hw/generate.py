@@ -9,6 +9,7 @@ from amaranth.back import verilog
 
 from kfpga.hw.ads8364 import ADS8364Controller
 from kfpga.hw.clockdiv import ClockDivider
+from kfpga.hw.cores import make_core
 from kfpga.hw.divider import Divider
 from kfpga.hw.top import AdcFrontend, FilterSystem
 
@@ -126,7 +127,7 @@ def write_block(out_dir, block, config=None, **params):
     out_dir.mkdir(parents=True, exist_ok=True)
     if block == "core":
         variant = params.pop("variant", None) or config.spec.default_variant
-        dut = config.spec.make_core(config, variant, **params)
+        dut = make_core(config, variant, **params)
     elif block == "divider":
         dut = ClockDivider(**params)
     elif block == "controller":

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from kfpga.hw.cores import make_core
+
 __all__ = ["filter_core"]
 
 
@@ -46,4 +48,4 @@ def filter_core(config=None, *, filter=None, variant=None, channels=1, architect
     variant = variant or config.spec.default_variant
     config.require_hardware(variant, architecture)
     options = {} if stages is None else {"stages": stages}
-    return config.spec.make_core(config, variant, channels=channels, architecture=architecture, **options)
+    return make_core(config, variant, channels=channels, architecture=architecture, **options)

@@ -104,7 +104,7 @@ class _FullBuild:
         self.regs = core._states(self.names)
         m.submodules.div1 = self.div1 = Divider(**core._divider_args)
         m.submodules.div2 = self.div2 = Divider(**core._divider_args)
-        self.points = points = dict(core.config.spec.variants["full"].state_for(core.config.params))
+        self.points = points = dict(core.config.spec.model.variants["full"].state_for(core.config.params))
         # working registers of the channel being updated
         self.channel = Signal.like(core.i.payload.channel)
         self.sample = Signal(signed(CODE_FORMAT.width))

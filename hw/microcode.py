@@ -790,12 +790,12 @@ def programmable_names(config, variant):
     from kfpga.core.spec import Constant
 
     consts = [n for n, c in config.constants(variant).items() if isinstance(c, Constant) and isinstance(c.point, str)]
-    states = [n for n, point in config.spec.variants[variant].state_for(config.params) if isinstance(point, str)]
+    states = [n for n, point in config.spec.model.variants[variant].state_for(config.params) if isinstance(point, str)]
     return consts, states
 
 
 def _trace(config, variant, *, predict=False, programmable=()):
-    spec_variant = config.spec.variants[variant]
+    spec_variant = config.spec.model.variants[variant]
     ops = FoldOps(config.formats, programmable)
     k_ = ops.constants(config.constants(variant))
     states = spec_variant.state_for(config.params)
@@ -919,7 +919,7 @@ def compile_update(config, variant, *, channels=1, channel_bits=None, predict=Fa
     ``programmable``: the constants and the reset state in register-file words that a bus writes
     (through shadow words, copied between updates by the commit routine), so that no product is
     specialised to a built-in constant; at power-up they hold the config's values."""
-    spec_variant = config.spec.variants[variant]
+    spec_variant = config.spec.model.variants[variant]
     if predict and spec_variant.predict is None:
         raise ValueError(f"the {config.spec.name} filter's {variant} variant takes every sample as a measurement: "
                          "no update without one (missing samples do not apply)")

@@ -10,6 +10,7 @@ from amaranth.lib.wiring import In, Out
 from kfpga.core import registry
 from kfpga.hw.ads8364 import CONV0, ADS8364Controller, SampleLayout
 from kfpga.hw.clockdiv import ClockDivider
+from kfpga.hw.cores import make_core
 
 __all__ = ["FilterSystem", "AdcFrontend", "PORTS", "ADC_PINS", "out_field", "prefilters", "prefilter_core", "port_widths"]
 
@@ -157,7 +158,7 @@ class _Words(NamedTuple):
 def prefilters():
     """The registered filters that can sit between the controller and the core (a spec with a
     ``prefilter``)."""
-    return [spec.name for spec in registry.specs() if spec.prefilter is not None]
+    return [spec.name for spec in registry.specs() if spec.hardware.prefilter is not None]
 
 
 def prefilter_core(config, channels):
@@ -165,18 +166,18 @@ def prefilter_core(config, channels):
     be able to overflow (its words reach the core unflagged)."""
     from kfpga.core.fixedmodel import FixedModel
 
-    if config.spec.prefilter is None:
+    if config.spec.hardware.prefilter is None:
         raise ValueError(f"the pre-filter must be one of {', '.join(prefilters())}, not {config.filter}")
     sites = FixedModel(config).kernel(False).sites
     if sites:
         raise ValueError(f"the pre-filter's formats can overflow (at {', '.join(sites)}); its output goes to the core "
                          "unflagged, so it needs formats that cannot (its defaults)")
-    return config.spec.make_core(config, config.spec.default_variant, channels=channels)
+    return make_core(config, config.spec.default_variant, channels=channels)
 
 
 def out_field(config, name=None):
     """The output field that drives ``out_data`` (default: the filter's), checked."""
-    name = config.spec.default_output if name is None else name
+    name = config.spec.model.default_output if name is None else name
     if name not in config.output_names:
         raise ValueError(f"out_field must be one of {', '.join(config.output_names)} for the {config.filter} filter, "
                          f"not {name!r}")
@@ -259,7 +260,7 @@ class FilterSystem(wiring.Component):
             if len(config.inputs) != 1:
                 raise ValueError(f"six channels of their own need a one-input filter; this model reads "
                                  f"{len(config.inputs)} ADC channels per update")
-            if spec.adc is not None and spec.adc(config.params) is not None:
+            if spec.model.adc is not None and spec.model.adc(config.params) is not None:
                 raise ValueError("six channels filter every ADC channel: the model's adc does not apply")
             if channel is not None:
                 raise ValueError("six channels filter every ADC channel: channel does not apply")
@@ -276,14 +277,14 @@ class FilterSystem(wiring.Component):
                                                                        else 1)
         # the pre-filter's one input and the output it passes on, by its spec's names
         self.prefilter_ports = None if prefilter is None else (
-            prefilter.spec.inputs_for(prefilter.params)[0][0], prefilter.spec.default_output)
+            prefilter.spec.inputs_for(prefilter.params)[0][0], prefilter.spec.model.default_output)
         # several inputs: all six are converted at one instant and read; the update takes its own
         channels = 6 if six_channel or len(self.adc) > 1 else 1
         config.board.check(channels, ratio, self.sensors)
         self.frontend = AdcFrontend(six_channel=six_channel or len(self.adc) > 1, channel=self.channel, ratio=ratio,
                                     timeout_periods=timeout_periods, period=config.board.period_cycles(self.sensors))
         options = {} if stages is None else {"stages": stages}
-        self.core = spec.make_core(config, self.variant, channels=6 if six_channel else self.sensors,
+        self.core = make_core(config, self.variant, channels=6 if six_channel else self.sensors,
                                    architecture=architecture, **options)
         self.architecture = architecture or spec.architectures(self.variant, config.params)[0]
         self.ports = port_widths(self.sensors)

@@ -41,7 +41,7 @@ import numpy as np
 from kfpga.core.errors import ConfigError
 from kfpga.core.formats import MAX_WORD, register_formats
 from kfpga.core.params import number, vector
-from kfpga.core.spec import Constant, FilterSpec, Mode, MutationBlock, Output, Variant
+from kfpga.core.spec import Build, Constant, Docs, FilterSpec, Hardware, Mode, Model, MutationBlock, Output, Variant
 from kfpga.model import cvloop as eq
 from kfpga.model import start
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
@@ -296,41 +296,45 @@ def _mutation():
 def _coverage():
     """The many-track core (2 x 3 states through one loop)."""
     from kfpga.core.config import FilterConfig
-    from kfpga.core.spec import resolve
 
-    return {"tracker3": lambda: resolve("kfpga.hw.alphabeta:TrackerCore")(FilterConfig(filter=SPEC.name), tracks=3)}
+    return {"tracker3": Build(FilterConfig(filter=SPEC.name), "steady", architecture="parallel", options={"tracks": 3})}
 
 
 SPEC = FilterSpec(
     name="alphabeta",
-    aliases=("alpha-beta",),
-    summary="alpha-beta tracker (marine radar ARPA), constant gains alpha, beta; one axis of a track per channel",
-    source="[Chen]: Chen and Yang 2016, Research on the alpha-beta algorithm in a marine radar ARPA system",
     params=AlphaBetaParams,
-    points=POINTS,
-    inputs=(("z", "the measured position (a radar coordinate, 16-bit)"),),
-    outputs=(Output("x", "x1", "filtered position"), Output("v", "x2", "velocity (per unit of T)")),
-    variants=VARIANTS,
-    points_for=_points_for,
-    default_formats=_default_formats,
-    ranges=_ranges,
-    validate=_validate,
-    reference=reference,
-    core="kfpga.hw.alphabeta:make_core",
-    goals=_goals,
-    default_output="x",
-    random_params=_random_params,
-    presets={
-        "ab-paper": ("the paper's tracker ([Chen]): alpha = beta = 0.5 as printed, T = 1", AlphaBetaParams),
-        "ab-bb": ("Benedict-Bordner at the paper's alpha = 0.5: beta = alpha^2/(2 - alpha) = 0.1667, T = 1",
-                  lambda: AlphaBetaParams(alpha=0.5, beta=benedict_bordner(0.5))),
-        "ab-critical": ("critically damped at the paper's alpha = 0.5: beta = (1 - sqrt(1 - alpha))^2 = 0.0858, T = 1",
-                        lambda: AlphaBetaParams(alpha=0.5, beta=critically_damped(0.5))),
-    },
-    error_std=_error_std,
+    docs=Docs(
+        summary="alpha-beta tracker (marine radar ARPA), constant gains alpha, beta; one axis of a track per channel",
+        source="[Chen]: Chen and Yang 2016, Research on the alpha-beta algorithm in a marine radar ARPA system",
+        aliases=("alpha-beta",),
+    ),
+    model=Model(
+        points=POINTS,
+        inputs=(("z", "the measured position (a radar coordinate, 16-bit)"),),
+        outputs=(Output("x", "x1", "filtered position"), Output("v", "x2", "velocity (per unit of T)")),
+        variants=VARIANTS,
+        reference=reference,
+        ranges=_ranges,
+        default_output="x",
+        points_for=_points_for,
+        default_formats=_default_formats,
+        validate=_validate,
+        random_params=_random_params,
+        presets={
+            "ab-paper": ("the paper's tracker ([Chen]): alpha = beta = 0.5 as printed, T = 1", AlphaBetaParams),
+            "ab-bb": ("Benedict-Bordner at the paper's alpha = 0.5: beta = alpha^2/(2 - alpha) = 0.1667, T = 1",
+                      lambda: AlphaBetaParams(alpha=0.5, beta=benedict_bordner(0.5))),
+            "ab-critical": ("critically damped at the paper's alpha = 0.5: beta = (1 - sqrt(1 - alpha))^2 = 0.0858, T = 1",
+                            lambda: AlphaBetaParams(alpha=0.5, beta=critically_damped(0.5))),
+        },
+        error_std=_error_std,
+        period=lambda params: (params.T, True),
+        modes=(TRACKS,),
+    ),
+    hardware=Hardware(
+        goals=_goals,
+        mutation=_mutation,
+        coverage=_coverage,
+    ),
     evaluation="kfpga.model.evaluations.alphabeta:EVALUATION",
-    modes=(TRACKS,),
-    mutation=_mutation,
-    coverage=_coverage,
-    period=lambda params: (params.T, True),
 )

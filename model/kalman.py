@@ -56,7 +56,7 @@ from kfpga.core.formats import (
     register_formats,
 )
 from kfpga.core.params import check_measured_start, matrix, number, vector
-from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
+from kfpga.core.spec import Build, Constant, Docs, FilterSpec, Hardware, Model, Output, Point, Variant
 from kfpga.model import start
 from kfpga.model.ranges import float_ranges, full_scale_stimulus
 from kfpga.model.riccati import PBHError, check_pbh, dare, loop_frac_bits
@@ -923,8 +923,8 @@ def _validate(config):
     for i, v in enumerate(params.x0):
         if not f[f"x{i + 1}"].covers(abs(v)):
             raise ConfigError(f"model.x0[{i}] = {v:g} does not fit formats.x{i + 1} = {f[f'x{i + 1}']}")
-    names = {name for name, _ in config.spec.variants["full"].state_for(params)}
-    if config.spec.variants["full"].applies(params) is None:
+    names = {name for name, _ in config.spec.model.variants["full"].state_for(params)}
+    if config.spec.model.variants["full"].applies(params) is None:
         for i in range(params.n):
             for j in range(i, params.n):
                 name = f"p{i + 1}{j + 1}"
@@ -1098,33 +1098,38 @@ def _coverage():
                                Q=((1.0,),), H=((1.0, 0.0, 0.0),), R=((25.0,),), T=0.01)
     negative = FilterConfig(filter=SPEC.name, params=replace(_preset_ca3(), x0=(-40.0, 3.5, -0.25)))
     return {f"{SPEC.name}-tracker-T0.01": FilterConfig(filter=SPEC.name, params=tracker),
-            f"{SPEC.name}-ca3-x0-steady-parallel-9": lambda: SPEC.make_core(negative, "steady", channels=9)}
+            f"{SPEC.name}-ca3-x0-steady-parallel-9": Build(negative, "steady", channels=9, architecture="parallel")}
 
 
 SPEC = FilterSpec(
     name="kalman",
-    summary="any linear state-space model: n = 1..4 states, m = 1..2 observations, from F, G, Q, H, R",
-    source="your own linear state-space model: the general form of [Zhang], [Zhong], [Fukuda] and [Chen]",
     params=StateSpaceParams,
-    points=POINTS,
-    inputs=_inputs,
-    outputs=_outputs_for,
-    variants=VARIANTS,
-    points_for=_points_for,
-    default_formats=_default_formats,
-    ranges=_ranges,
-    validate=_validate,
-    reference=reference,
-    core="kfpga.hw.kalman:make_core",
-    goals=_goals,
-    default_output="x1",
-    random_params=_random_params,
-    scenario=_scenario,
-    scenarios=("model", "sine", "random-accel"),
-    presets=PRESETS,
-    coverage=_coverage,
-    measured=_measured,
-    adc=lambda params: params.adc,
-    error_std=_error_std,
-    period=lambda params: (params.T, False),
+    docs=Docs(
+        summary="any linear state-space model: n = 1..4 states, m = 1..2 observations, from F, G, Q, H, R",
+        source="your own linear state-space model: the general form of [Zhang], [Zhong], [Fukuda] and [Chen]",
+    ),
+    model=Model(
+        points=POINTS,
+        inputs=_inputs,
+        outputs=_outputs_for,
+        variants=VARIANTS,
+        reference=reference,
+        ranges=_ranges,
+        default_output="x1",
+        points_for=_points_for,
+        default_formats=_default_formats,
+        validate=_validate,
+        random_params=_random_params,
+        scenario=_scenario,
+        scenarios=("model", "sine", "random-accel"),
+        presets=PRESETS,
+        measured=_measured,
+        adc=lambda params: params.adc,
+        error_std=_error_std,
+        period=lambda params: (params.T, False),
+    ),
+    hardware=Hardware(
+        goals=_goals,
+        coverage=_coverage,
+    ),
 )

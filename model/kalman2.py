@@ -42,7 +42,7 @@ from kfpga.core.board import WORST_PATH_GOAL_NS
 from kfpga.core.errors import ConfigError
 from kfpga.core.fixed import QFormat
 from kfpga.core.formats import MAX_WORD, covariance_frac, register_formats
-from kfpga.core.spec import Constant, FilterSpec, MutationBlock, Output, Variant
+from kfpga.core.spec import Constant, Docs, FilterSpec, Hardware, Model, MutationBlock, Output, Variant
 from kfpga.model import start
 from kfpga.model.cvloop import (
     POINTS,
@@ -326,27 +326,32 @@ def _coverage():
 
 SPEC = FilterSpec(
     name="kalman2",
-    summary="the paper's 2-state Kalman filter (angle, rate), steady-state or time-varying gain",
-    source="[Zhong]: Zhong et al., Design and implementation of Kalman filter based on FPGA",
     params=KalmanParams,
-    points=POINTS,
-    inputs=(("y", "the ADC code"),),
-    outputs=(Output("x1", "x1", "filtered position"), Output("x2", "x2", "rate"),
-             Output("yhat", "xl1", "one-step prediction of y")),
-    variants=VARIANTS,
-    points_for=_points_for,
-    default_formats=_default_formats,
-    ranges=_ranges,
-    validate=_validate,
-    reference=reference,
-    core="kfpga.hw.kalman2:make_core",
-    goals=_goals,
-    default_output="x1",
-    random_params=_random_params,
-    presets={"cv2": ("the paper's constant-velocity filter ([Zhong]): T = 1, Q = 2, R = 4, P0 = 10 I", KalmanParams)},
-    error_std=_error_std,
-    mutation=_mutation,
-    coverage=_coverage,
-    period=lambda params: (params.T, True),
+    docs=Docs(
+        summary="the paper's 2-state Kalman filter (angle, rate), steady-state or time-varying gain",
+        source="[Zhong]: Zhong et al., Design and implementation of Kalman filter based on FPGA",
+    ),
+    model=Model(
+        points=POINTS,
+        inputs=(("y", "the ADC code"),),
+        outputs=(Output("x1", "x1", "filtered position"), Output("x2", "x2", "rate"),
+                 Output("yhat", "xl1", "one-step prediction of y")),
+        variants=VARIANTS,
+        reference=reference,
+        ranges=_ranges,
+        default_output="x1",
+        points_for=_points_for,
+        default_formats=_default_formats,
+        validate=_validate,
+        random_params=_random_params,
+        presets={"cv2": ("the paper's constant-velocity filter ([Zhong]): T = 1, Q = 2, R = 4, P0 = 10 I", KalmanParams)},
+        error_std=_error_std,
+        period=lambda params: (params.T, True),
+    ),
+    hardware=Hardware(
+        goals=_goals,
+        mutation=_mutation,
+        coverage=_coverage,
+    ),
     evaluation="kfpga.model.evaluations.kalman2:EVALUATION",
 )

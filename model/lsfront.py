@@ -35,7 +35,7 @@ from kfpga.core.ads8364 import CODE_FORMAT, CODE_MAX
 from kfpga.core.fixed import QFormat, Rounding, bits_for
 from kfpga.core.formats import MAX_WORD
 from kfpga.core.params import number
-from kfpga.core.spec import Constant, FilterSpec, MutationBlock, Output, Point, Variant
+from kfpga.core.spec import Constant, Docs, FilterSpec, Hardware, Model, MutationBlock, Output, Point, Variant
 
 #: The longest window the table may name.
 MAX_WINDOW = 64
@@ -586,29 +586,34 @@ def _mutation():
 
 SPEC = FilterSpec(
     name="lsfront",
-    aliases=("ls-frontend",),
-    summary="the least-squares pseudo-acceleration front end into the va2 filter: a line through the last Ns speed-log "
-            "samples gives the velocity and its slope, Ns from the innovation; steady-state gains per mode",
-    source="[Fukuda]: Fukuda (Furuno), JP3218441B2, a ship's speed with a least-squares front end to a Kalman filter",
     params=LSFrontParams,
-    points=POINTS,
-    inputs=(("v", "the speed log's velocity (a 16-bit ADC code, lsb m/s per code)"),),
-    outputs=(Output("velocity", "x1", "the velocity estimate (codes)"),
-             Output("accel", "x2", "the acceleration estimate (codes per sample)"),
-             Output("ns", QFormat(8, 0), "the window of this sample's fit, 0 for the raw velocity (m = 1)")),
-    variants=VARIANTS,
-    points_for=_points_for,
-    default_formats=_default_formats,
-    ranges=_ranges,
-    validate=_validate,
-    reference=reference,
-    core=None,
-    goals=_goals,
-    default_output="velocity",
-    random_params=_random_params,
-    scenario=_scenario,
+    docs=Docs(
+        summary="the least-squares pseudo-acceleration front end into the va2 filter: a line through the last Ns speed-log "
+                "samples gives the velocity and its slope, Ns from the innovation; steady-state gains per mode",
+        source="[Fukuda]: Fukuda (Furuno), JP3218441B2, a ship's speed with a least-squares front end to a Kalman filter",
+        aliases=("ls-frontend",),
+    ),
+    model=Model(
+        points=POINTS,
+        inputs=(("v", "the speed log's velocity (a 16-bit ADC code, lsb m/s per code)"),),
+        outputs=(Output("velocity", "x1", "the velocity estimate (codes)"),
+                 Output("accel", "x2", "the acceleration estimate (codes per sample)"),
+                 Output("ns", QFormat(8, 0), "the window of this sample's fit, 0 for the raw velocity (m = 1)")),
+        variants=VARIANTS,
+        reference=reference,
+        ranges=_ranges,
+        default_output="velocity",
+        points_for=_points_for,
+        default_formats=_default_formats,
+        validate=_validate,
+        random_params=_random_params,
+        scenario=_scenario,
+        scenarios=("sine", "random-accel"),
+        period=lambda params: (params.T, True),
+    ),
+    hardware=Hardware(
+        goals=_goals,
+        mutation=_mutation,
+    ),
     evaluation="kfpga.model.evaluations.lsfront:EVALUATION",
-    mutation=_mutation,
-    period=lambda params: (params.T, True),
-    scenarios=("sine", "random-accel"),
 )

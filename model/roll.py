@@ -39,7 +39,7 @@ import numpy as np
 from kfpga.core.fixed import QFormat
 from kfpga.core.formats import MAX_WORD
 from kfpga.core.params import matrix, number
-from kfpga.core.spec import Constant, FilterSpec, Output, Point, Variant
+from kfpga.core.spec import Constant, Docs, FilterSpec, Hardware, Model, Output, Point, Variant
 from kfpga.model.start import check_init, measured
 
 __all__ = ["RollParams", "PAPER_P0", "transition", "predict", "table1", "synthetic_roll", "MIN_SAMPLES", "SPEC",
@@ -628,29 +628,34 @@ def _scenario(name, n, seed, params):
 
 SPEC = FilterSpec(
     name="roll",
-    summary="ship-roll interval predictor: two constant-acceleration filters on alternate samples, improved form, "
-            "square-root covariance; each sample's prediction of the sample 2 ahead (1 s)",
-    source="[Zhang]: Zhang et al. 2021, the combined interval Kalman predictor of ship roll",
     params=RollParams,
-    points=POINTS,
-    inputs=(("z", "the roll angle (a 16-bit ADC code, lsb degrees per code)"),),
-    outputs=(Output("pred", "x1", "the predicted roll angle of the sample 2 ahead (the next of the filter that took this one)"),
-             Output("rate", "x2", "the predicted roll rate times the filter step"),
-             Output("accel", "x3", "the predicted roll acceleration times the filter step squared")),
-    variants=VARIANTS,
-    points_for=_points_for,
-    default_formats=_default_formats,
-    ranges=_ranges,
-    validate=_validate,
-    reference=reference,
-    core=None,
-    goals=_goals,
-    default_output="pred",
-    random_params=_random_params,
-    scenario=_scenario,
+    docs=Docs(
+        summary="ship-roll interval predictor: two constant-acceleration filters on alternate samples, improved form, "
+                "square-root covariance; each sample's prediction of the sample 2 ahead (1 s)",
+        source="[Zhang]: Zhang et al. 2021, the combined interval Kalman predictor of ship roll",
+    ),
+    model=Model(
+        points=POINTS,
+        inputs=(("z", "the roll angle (a 16-bit ADC code, lsb degrees per code)"),),
+        outputs=(Output("pred", "x1", "the predicted roll angle of the sample 2 ahead (the next of the filter that took this one)"),
+                 Output("rate", "x2", "the predicted roll rate times the filter step"),
+                 Output("accel", "x3", "the predicted roll acceleration times the filter step squared")),
+        variants=VARIANTS,
+        reference=reference,
+        ranges=_ranges,
+        default_output="pred",
+        points_for=_points_for,
+        default_formats=_default_formats,
+        validate=_validate,
+        random_params=_random_params,
+        scenario=_scenario,
+        scenarios=("roll",),
+        period=lambda params: (params.T, True),
+    ),
+    hardware=Hardware(
+        goals=_goals,
+    ),
     evaluation="kfpga.model.evaluations.roll:EVALUATION",
-    period=lambda params: (params.T, True),
-    scenarios=("roll",),
 )
 
 

@@ -112,8 +112,8 @@ def check_rails(name, codes):
 def for_config(name, n, seed, config):
     """``(truth, codes)`` of scenario ``name`` for a config: its filter's own scenarios when it has
     them (``FilterSpec.scenario``), else :func:`make` on one input."""
-    if config.spec.scenario is not None:
-        return config.spec.scenario(name, n, seed, config.params)
+    if config.spec.model.scenario is not None:
+        return config.spec.model.scenario(name, n, seed, config.params)
     return make(name, n, seed, config.params)
 
 

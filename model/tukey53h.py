@@ -55,7 +55,7 @@ from kfpga.core.board import WORST_PATH_GOAL_NS
 from kfpga.core.fixed import QFormat, Rounding
 from kfpga.core.formats import MAX_WORD, precision_frac_bits
 from kfpga.core.params import number
-from kfpga.core.spec import Constant, FilterSpec, Mode, MutationBlock, Output, Point, Prefilter, Variant
+from kfpga.core.spec import Constant, Docs, FilterSpec, Hardware, Mode, Model, MutationBlock, Output, Point, Prefilter, Variant
 
 __all__ = ["Tukey53HParams", "SPEC", "POINTS", "FLAG", "DELAY", "MIN_OFFLINE", "update", "median5", "median3",
            "MEDIAN5", "MEDIAN3", "network_layer", "network_reads", "hanning_partial", "hanning", "residual", "decide",
@@ -536,34 +536,39 @@ def _mutation():
 
 SPEC = FilterSpec(
     name="tukey53h",
-    aliases=("53h",),
-    summary="Tukey's 53H outlier smoother (medians of 5 and 3, Hanning, threshold test); 4 samples late",
-    source="[Lu]: Lü and Geng 2019, online smoothing of ship integrated-navigation data by 53H filtering",
     params=Tukey53HParams,
-    points=POINTS,
-    inputs=(("y", "the sample (a 16-bit ADC code)"),),
-    outputs=(Output("y", "y", "the sample 4 before, or its smoothed value where it is an outlier"),),
-    variants=VARIANTS,
-    points_for=_points_for,
-    default_formats=_default_formats,
-    ranges=_ranges,
-    validate=_validate,
-    reference=reference,
-    core="kfpga.hw.tukey53h:make_core",
-    goals=_goals,
-    default_output="y",
-    random_params=_random_params,
-    scenario=_scenario,
-    presets={
-        "53h-velocity": ("a ship's velocity in mm/s codes at T = 1 s: threshold a_max*T with a_max = 0.5 m/s^2 "
-                         "(500 codes)", Tukey53HParams),
-        "53h-attitude": ("an attitude angle in 0.01 deg codes at T = 1 s: threshold omega_max*T with omega_max = "
-                         "3 deg/s (300 codes)", lambda: Tukey53HParams(threshold=attitude_threshold(3.0, 1.0, 0.01))),
-    },
-    formal_config=_formal_config,
+    docs=Docs(
+        summary="Tukey's 53H outlier smoother (medians of 5 and 3, Hanning, threshold test); 4 samples late",
+        source="[Lu]: Lü and Geng 2019, online smoothing of ship integrated-navigation data by 53H filtering",
+        aliases=("53h",),
+    ),
+    model=Model(
+        points=POINTS,
+        inputs=(("y", "the sample (a 16-bit ADC code)"),),
+        outputs=(Output("y", "y", "the sample 4 before, or its smoothed value where it is an outlier"),),
+        variants=VARIANTS,
+        reference=reference,
+        ranges=_ranges,
+        default_output="y",
+        points_for=_points_for,
+        default_formats=_default_formats,
+        validate=_validate,
+        random_params=_random_params,
+        scenario=_scenario,
+        scenarios=("sine", "random-accel"),
+        presets={
+            "53h-velocity": ("a ship's velocity in mm/s codes at T = 1 s: threshold a_max*T with a_max = 0.5 m/s^2 "
+                             "(500 codes)", Tukey53HParams),
+            "53h-attitude": ("an attitude angle in 0.01 deg codes at T = 1 s: threshold omega_max*T with omega_max = "
+                             "3 deg/s (300 codes)", lambda: Tukey53HParams(threshold=attitude_threshold(3.0, 1.0, 0.01))),
+        },
+        modes=(OFFLINE,),
+    ),
+    hardware=Hardware(
+        goals=_goals,
+        mutation=_mutation,
+        formal_config=_formal_config,
+        prefilter=PREFILTER,
+    ),
     evaluation="kfpga.model.evaluations.tukey53h:EVALUATION",
-    modes=(OFFLINE,),
-    prefilter=PREFILTER,
-    mutation=_mutation,
-    scenarios=("sine", "random-accel"),
 )

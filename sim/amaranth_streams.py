@@ -13,6 +13,7 @@ import random
 import numpy as np
 from amaranth.sim import Simulator
 
+from kfpga.hw.cores import make_core
 from kfpga.sim.scoreboard import Scoreboard
 
 __all__ = ["drive", "collect", "run_stream", "run_core", "run_with_deadline", "measure_timing", "check_liveness",
@@ -132,8 +133,7 @@ def run_core(config, variant, y, *, seed, channels=1, p_idle=0.0, p_ready=1.0, o
     columns = {k: np.asarray(v) for k, v in y.items()} if isinstance(y, dict) else {names[0]: np.asarray(y)}
     count = len(columns[names[0]])
     ch = rng.integers(0, channels, count) if channels > 1 else np.zeros(count, dtype=np.int64)
-    spec = config.spec
-    dut = spec.make_core(config, variant, channels=channels, **(options or {}))
+    dut = make_core(config, variant, channels=channels, **(options or {}))
     samples = [{name: int(columns[name][i]) for name in names} for i in range(count)]
     payloads = [{"channel": int(c), **s} for c, s in zip(ch, samples, strict=True)]
     out = run_stream(dut, payloads, seed=seed, p_idle=p_idle, p_ready=p_ready, extra_cycles=50)

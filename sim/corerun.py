@@ -27,6 +27,7 @@ import numpy as np
 from amaranth.hdl import Shape
 
 from kfpga.core.config import FilterConfig
+from kfpga.hw.cores import make_core
 from kfpga.hw.layouts import input_layout, output_layout
 from kfpga.sim.scoreboard import Scoreboard
 from kfpga.sim.system import DEFAULT_ROOT, SystemRunFailed, compile_cached
@@ -208,7 +209,7 @@ def build(simulator, *, config=None, variant=None, channels=1, architecture=None
         return sorted(folder.glob("*.v"))
 
     build_dir, command = compile_cached(simulator, f"core-{variant}-{channels}", write, CORE_COSIM, root=root)
-    cycles = figures_only(config.spec.make_core(config, variant, channels=channels,
+    cycles = figures_only(make_core(config, variant, channels=channels,
                                                 architecture=architecture)).cycles_per_update
     return CoreBuild(simulator, build_dir, command, config, variant, channels, in_fields, out_fields, cycles)
 

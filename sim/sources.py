@@ -65,7 +65,7 @@ def scenario_source(name, n, seed, params=None, *, glitches=None, config=None, a
         count = -(-n // sensors)
         codes, truths = _runs(name, count, seed, config, params, sensors)
         return sensor_source(codes, truths, adc[0] if adc else 0, name=f"{name} (seed {seed}), {sensors} sensors")
-    if config is not None and config.spec.scenario is not None:
+    if config is not None and config.spec.model.scenario is not None:
         return _spec_source(name, n, seed, config, adc, glitches)
     codes, truths = _runs(name, n, seed, config, params, 6)
     return Source(codes, truth=truths, glitches=glitches, name=f"{name} (seed {seed})")
@@ -75,10 +75,10 @@ def _runs(name, n, seed, config, params, count):
     """``(codes, truths)``, each ``(count, n)``: ``count`` runs of scenario ``name`` of one input,
     the filter's own scenarios seeded apart, or the generic ones as one run, each row shifted by
     337 samples (distinct waveforms from one seeded run)."""
-    if config is not None and config.spec.scenario is not None:
+    if config is not None and config.spec.model.scenario is not None:
         codes, truths = np.zeros((count, n), dtype=np.int64), np.zeros((count, n))
         for c in range(count):
-            truth, y = config.spec.scenario(name, n, seed + 1009 * c, config.params)
+            truth, y = config.spec.model.scenario(name, n, seed + 1009 * c, config.params)
             scenarios.check_rails(name, y)
             codes[c], truths[c] = (next(iter(y.values())) if isinstance(y, dict) else y), truth
         return codes, truths
@@ -106,7 +106,7 @@ def _spec_source(name, n, seed, config, adc, glitches):
     codes, truths = np.zeros((6, n), dtype=np.int64), np.zeros((6, n))
     first = None
     for c in range(6):
-        truth, y = config.spec.scenario(name, n, seed + 1009 * c, config.params)
+        truth, y = config.spec.model.scenario(name, n, seed + 1009 * c, config.params)
         scenarios.check_rails(name, y)
         first = (truth, y) if first is None else first
         codes[c] = next(iter(y.values())) if isinstance(y, dict) else y

@@ -35,6 +35,7 @@ import numpy as np
 from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
 from kfpga.core.config import FilterConfig
 from kfpga.flows.analysis import float_run, rmse, sqnr_db
+from kfpga.hw.cores import make_core
 from kfpga.sim.ads8364 import Read
 from kfpga.sim.scoreboard import Scoreboard
 from kfpga.sim.sources import csv_source, scenario_source
@@ -84,7 +85,7 @@ def make_source(params, count):
         source = csv_source(params["csv"], clip=params.get("clip", False), config=config, adc=adc, sensors=sensors)
         source.glitches = glitches
         return source
-    return scenario_source(params.get("scenario") or config.spec.scenarios[0], count, params["seed"], config.params,
+    return scenario_source(params.get("scenario") or config.spec.model.scenarios[0], count, params["seed"], config.params,
                            glitches=glitches, config=config, adc=adc, sensors=sensors)
 
 
@@ -163,7 +164,7 @@ class SystemRecords:
         self.prefilter = load_prefilter(params)
         self.variant = params["variant"]
         self.six = bool(params.get("six"))
-        self.field = params.get("out_field") or self.config.spec.default_output
+        self.field = params.get("out_field") or self.config.spec.model.default_output
         self.adc_channels = list(params.get("adc") or [params.get("channel") or 0])
         self.sensors = params.get("sensors") or 1
         self.source = make_source(params, expected_conversions)
@@ -227,7 +228,7 @@ class SystemRecords:
         truth = getattr(self.source, "truth", None)
         if truth is None:
             return None
-        late = self.prefilter.spec.prefilter.delay if self.prefilter is not None else 0
+        late = self.prefilter.spec.hardware.prefilter.delay if self.prefilter is not None else 0
         return truth[channels, np.maximum(np.array([r.conversion for r in reads]) - late, 0) % truth.shape[1]]
 
     def glitch_figures(self):
@@ -242,7 +243,7 @@ class SystemRecords:
             return {}
         reads = ups[:n]
         hits = np.array([glitches.get(r.conversion, (None,))[0] == r.channel for r in reads])
-        pre = None if self.prefilter is None else self.prefilter.spec.prefilter
+        pre = None if self.prefilter is None else self.prefilter.spec.hardware.prefilter
         bound = pre.bound(self.prefilter.params) if pre is not None else GLITCH_BOUND
         out = {"glitches_injected": len(glitches), "glitches_in_reads": int(hits.sum()), "glitch_bound": bound}
         channels = np.array([r.channel for r in reads])
@@ -528,7 +529,7 @@ def cycles_allowed(config, variant, samples, *, six=False, sensors=1, reads=1, c
     from kfpga.hw.generate import figures_only
 
     base = 600 if reads > 1 or six else 300
-    core = figures_only(config.spec.make_core(config, variant, channels=6 if six else sensors, **(core_options or {})))
+    core = figures_only(make_core(config, variant, channels=6 if six else sensors, **(core_options or {})))
     estimates = 6 if six else 1  # per conversion
     period = config.board.period_cycles(sensors) or 0  # the conversion timer's
     per_conversion = max(base, estimates * (2 * core.cycles_per_update + 60)) + period

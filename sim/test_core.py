@@ -7,6 +7,7 @@ import numpy as np
 from cocotb.simtime import get_sim_time
 from cocotb.triggers import ClockCycles, ReadOnly, RisingEdge, with_timeout
 
+from kfpga.hw.cores import make_core
 from kfpga.sim.bench import CoreTB, deadline, sim_params, write_results
 from kfpga.sim.scoreboard import Scoreboard
 from kfpga.sim.sources import stress_codes
@@ -52,7 +53,7 @@ async def core_bit_exact(dut):
     columns = {name: codes if j == 0 else stress_codes(p["seed"] + 7 * j, n) for j, name in enumerate(names)}
     words = [{"channel": int(c), **{name: int(columns[name][i]) for name in names}} for i, c in enumerate(channels)]
     # the deadline: ten times the cycles the core needs at the offered rates, so a hang fails
-    per_update = tb.config.spec.make_core(tb.config, p["variant"], channels=count,
+    per_update = make_core(tb.config, p["variant"], channels=count,
                                           architecture=p.get("architecture")).cycles_per_update
     rate = (1 - float(p.get("p_idle", 0.0))) * float(p.get("p_ready", 1.0))
     await with_timeout(pump(dut.clk, tb.source, tb.sink, words), int(10 * n * (per_update + 2) / rate + 1000) * 20,
@@ -89,7 +90,7 @@ async def core_idle_after_reset(dut):
     tb.source.p_idle, tb.sink.p_ready = 0.0, 1.0
     n = max(8, min(40, int(p.get("samples", 2000)) // 4))
     names = tb.config.inputs
-    per_update = tb.config.spec.make_core(tb.config, p["variant"], channels=tb.channels,
+    per_update = make_core(tb.config, p["variant"], channels=tb.channels,
                                           architecture=p.get("architecture")).cycles_per_update
     compared = 0
     for gap in range(4):

@@ -37,7 +37,7 @@ def test_every_filter_has_its_page(spec):
     page = ROOT / "docs" / "filters" / f"{spec.name}.md"
     assert page.is_file(), f"docs/filters/{spec.name}.md is missing: every registered filter has a page"
     assert f"filters/{spec.name}\n" in (ROOT / "docs" / "index.md").read_text(), "not in the manual's contents"
-    assert spec.name in page.read_text().splitlines()[0] or spec.source.split(":")[0] in page.read_text()
+    assert spec.name in page.read_text().splitlines()[0] or spec.docs.source.split(":")[0] in page.read_text()
     assert f"docs/filters/{spec.name}.md" in README
 
 

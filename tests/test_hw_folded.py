@@ -20,11 +20,11 @@ from kfpga.sim.amaranth_streams import measure_timing, run_stream
 from kfpga.sim.scoreboard import Scoreboard
 
 CASES = [pytest.param(spec.name, variant, id=f"{spec.name}-{variant}")
-         for spec in registry.specs() for variant in spec.variants]
+         for spec in registry.specs() for variant in spec.model.variants]
 #: The folded core runs any update, but a variant the spec keeps model-only has no core.
 HW_CASES = [pytest.param(spec.name, variant, id=f"{spec.name}-{variant}")
-            for spec in registry.specs() for variant in spec.variants
-            if spec.variants[variant].hardware(spec.params()) is None]
+            for spec in registry.specs() for variant in spec.model.variants
+            if spec.model.variants[variant].hardware(spec.params()) is None]
 
 
 def _words(config, y, channels):

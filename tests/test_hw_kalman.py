@@ -16,6 +16,7 @@ import pytest
 from kfpga.core import registry
 from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
 from kfpga.core.config import ConfigError, FilterConfig
+from kfpga.hw.cores import make_core
 from kfpga.hw.generate import figures_only
 from kfpga.hw.kalman import FullCore, SteadyCore, default_stages
 from kfpga.model.kalman import SPEC
@@ -61,13 +62,13 @@ def test_random_models_rtl_equals_model(seed):
     done = 0
     for _ in range(8):
         params = SPEC.random_params(rng)
-        for variant in SPEC.variants:
+        for variant in SPEC.model.variants:
             try:
                 config = FilterConfig(filter="kalman", params=params)
                 config.require_variant(variant)
             except ConfigError:
                 continue
-            if config.spec.variants[variant].hardware(params):
+            if config.spec.model.variants[variant].hardware(params):
                 assert variant == "full" and params.m == 2  # the only model-only case
                 continue
             n = 150 if variant == "full" else 400
@@ -81,7 +82,7 @@ def test_random_models_rtl_equals_model(seed):
 @pytest.mark.parametrize(("preset", "variant"), PRESET_CASES)
 def test_preset_latency_and_cycles_per_update_are_measured(preset, variant):
     config = preset_config(preset)
-    dut = config.spec.make_core(config, variant)
+    dut = make_core(config, variant)
     latency, accepted, produced = measure_timing(dut, config)
     assert latency == dut.latency
     assert accepted[2:7] == [dut.cycles_per_update] * 5

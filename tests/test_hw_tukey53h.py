@@ -12,6 +12,7 @@ from test_model_tukey53h import ANGLE, CONFIG, LATITUDE, _heading, _latitude, gl
 from kfpga.cli import main
 from kfpga.core.config import FilterConfig
 from kfpga.core.fixedmodel import FixedModel
+from kfpga.hw.cores import make_core
 from kfpga.model import tukey53h as th
 from kfpga.sim.amaranth_streams import measure_timing, run_core
 from tests.helpers.simulators import core_is_bit_exact_on, need
@@ -25,7 +26,7 @@ def test_core_bit_exact_any_channel_order_with_backpressure(channels, seed):
 
 
 def test_core_takes_one_sample_per_clock_of_the_same_channel():
-    dut = CONFIG.spec.make_core(CONFIG, "online", channels=6)
+    dut = make_core(CONFIG, "online", channels=6)
     latency, accepted, produced = measure_timing(dut, CONFIG)
     assert dut.cycles_per_update == 1 and set(accepted) == {1} and set(produced) == {1}
     assert latency == dut.latency == 15
@@ -33,9 +34,9 @@ def test_core_takes_one_sample_per_clock_of_the_same_channel():
 
 def test_core_refuses_channel_counts():
     with pytest.raises(ValueError, match="channels must be an integer 1..8"):
-        CONFIG.spec.make_core(CONFIG, "online", channels=0)
+        make_core(CONFIG, "online", channels=0)
     with pytest.raises(ValueError, match="channels must be an integer 1..8"):
-        CONFIG.spec.make_core(CONFIG, "online", channels=9)
+        make_core(CONFIG, "online", channels=9)
 
 
 @pytest.mark.cosim

@@ -74,7 +74,7 @@ def test_reference_equals_filterpy(n, m, seed):
 
 def decomposed(params, variant, y):
     """The variant's update (the stage functions the fixed model and RTL run) in float64."""
-    v = SPEC.variants[variant]
+    v = SPEC.model.variants[variant]
     ops = FloatOps({})
     k = ops.constants(v.constants(params))
     state = {name: ops.input(value, point, name) for (name, point), value in

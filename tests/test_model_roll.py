@@ -144,7 +144,7 @@ def _float_run(variant, z, params):
     from kfpga.core.ops import FloatOps
 
     config = FilterConfig(filter="roll", params=params)
-    v = config.spec.variants[variant]
+    v = config.spec.model.variants[variant]
     x = dict(v.initial(params))
     out = []
     for code in z:

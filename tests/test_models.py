@@ -36,7 +36,7 @@ def _config(name, formats):
 def _cases():
     for name in NAMES:
         config = FilterConfig.from_toml(MODELS / f"{name}.toml")
-        for variant, v in config.spec.variants.items():
+        for variant, v in config.spec.model.variants.items():
             if v.applies(config.params) is None:
                 for formats in ("default", "proposed"):
                     yield pytest.param(name, formats, variant, id=f"{name}-{formats}-{variant}")
@@ -55,7 +55,7 @@ def test_every_model_has_both_variants_and_a_proposal():
 @pytest.mark.parametrize(("name", "formats", "variant"), CASES)
 def test_fixed_point_stays_within_one_percent_of_float_on_unseen_seeds(name, formats, variant):
     config = _config(name, formats)
-    scenario = config.spec.scenarios[0]
+    scenario = config.spec.model.scenarios[0]
     for seed in UNSEEN_SEEDS:
         assert seed not in SEARCH_SEEDS
         truth, y = scenarios.for_config(scenario, 20000, seed, config)

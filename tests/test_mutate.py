@@ -9,6 +9,7 @@ from amaranth import Elaboratable, Module, Signal
 from amaranth.back import rtlil
 
 from kfpga.core.config import FilterConfig
+from kfpga.hw.cores import make_core
 from kfpga.verify import mutate
 from kfpga.verify.formal import warm, yosys
 
@@ -23,7 +24,7 @@ def test_the_tied_bits_are_the_channel_field_of_a_one_channel_core(channels):
     """With one channel the tied bits are the payload bits that carry no sample (the channel
     field); with two channels, where the field carries both numbers, none is tied."""
     cfg = FilterConfig()
-    core = cfg.spec.make_core(cfg, "steady", channels=channels)
+    core = make_core(cfg, "steady", channels=channels)
     tied = mutate.channel_bits_tied(core)
     if channels == 2:
         assert tied is None

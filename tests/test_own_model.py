@@ -52,8 +52,8 @@ MODELS = {
 @pytest.mark.parametrize("name", MODELS)
 def test_default_formats_are_within_one_percent_for_every_variant(name, seed):
     config = MODELS[name]
-    truth, y = scenarios.for_config(config.spec.scenarios[0], 6000, seed, config)
-    for variant, v in config.spec.variants.items():
+    truth, y = scenarios.for_config(config.spec.model.scenarios[0], 6000, seed, config)
+    for variant, v in config.spec.model.variants.items():
         if v.applies(config.params):
             continue
         config.require_variant(variant)

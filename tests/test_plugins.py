@@ -68,7 +68,7 @@ def own_file(path, name):
 @pytest.mark.parametrize("name", registry.names())
 def test_a_filter_is_named_only_in_its_own_files_and_the_registry(name):
     spec = registry.get(name)
-    names = {spec.name, *spec.aliases}
+    names = {spec.name, *spec.docs.aliases}
     found = []
     for path in PACKAGE_FILES:
         if own_file(path, name) or path == ROOT / "kfpga" / "core" / "registry.py":

@@ -11,6 +11,7 @@ from kfpga.core import registry
 from kfpga.core.config import FilterConfig
 from kfpga.core.tools import iverilog_parse, iverilog_path
 from kfpga.flows.quartus import PinError, load_pins, port_bits, write_project
+from kfpga.hw.cores import make_core
 from kfpga.hw.resources import estimate
 from kfpga.hw.top import PORTS
 from kfpga.model.reference import KalmanParams
@@ -254,5 +255,5 @@ def test_the_folded_cores_meet_their_goals(capsys, name):
     assert r["fmax_mhz_estimate"] >= 50 and r["whole_design"]["fmax_mhz_estimate"] >= 50
     # one 18x18 multiplier; block memory holds the register file (18-bit words) and a program word a step
     spec = registry.get(name)
-    program = spec.make_core(FilterConfig(filter=name), spec.default_variant, architecture="folded").program
+    program = make_core(FilterConfig(filter=name), spec.default_variant, architecture="folded").program
     assert r["mul18"] == 1 and r["memory_bits"] > 18 * program.depth + len(program.words)

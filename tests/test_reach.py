@@ -43,7 +43,7 @@ def test_the_evaluation_steps_the_covariance_as_the_model_does(tmp_path):
     program = reach.compile_pair(_pair(tmp_path, core), {"i__payload": list(range(1, 17))})
     go = program.inputs(i__valid=1, o__ready=1)
     model = FixedModel(config, variant="full")
-    points = dict(config.spec.variants["full"].state_for(config.params))
+    points = dict(config.spec.model.variants["full"].state_for(config.params))
     state = program.init
     for k in range(1, 31):
         for _ in range(core.cycles_per_update):

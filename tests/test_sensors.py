@@ -75,11 +75,11 @@ def test_every_sensor_is_filtered_on_its_own():
 
     config = FilterConfig.from_dict(tomllib.loads(AB100))
     n, count = 7, 40
-    source = scenario_source(config.spec.scenarios[0], n * count, 5, config.params, config=config, adc=[0], sensors=n)
+    source = scenario_source(config.spec.model.scenarios[0], n * count, 5, config.params, config=config, adc=[0], sensors=n)
     codes = np.array([source.next() for _ in range(n * count)], dtype=np.int64)
 
     class Top:
-        six_channel, adc, channel, out_field = False, (0,), 0, config.spec.default_output
+        six_channel, adc, channel, out_field = False, (0,), 0, config.spec.model.default_output
 
     channels, values, _ = expected_words(config, "steady", Top, codes, n * count, sensors=n)
     assert channels.tolist() == [k % n for k in range(n * count)]

@@ -39,7 +39,7 @@ STARTS = {
     "kalman": ("kalman", tracker(x0=(5.0, -7.0, 3.0), init="measurement"), "x1", "x2"),
 }
 CASES = [pytest.param(key, variant, id=f"{key}-{variant}") for key, (name, params, _, _) in STARTS.items()
-         for variant in FilterConfig(filter=name, params=params).spec.variants]
+         for variant in FilterConfig(filter=name, params=params).spec.model.variants]
 
 
 @pytest.mark.parametrize(("key", "variant"), CASES)
@@ -50,7 +50,7 @@ def test_positions_from_the_first_sample_rates_from_the_first_two(key, variant):
     name, params, pos, rate = STARTS[key]
     y = np.array([1000, 1003, 1001, 1006, 1004, 1010], dtype=np.int64)
     config = FilterConfig(filter=name, params=params)
-    flt = config.spec.reference(params, variant, y)
+    flt = config.spec.model.reference(params, variant, y)
     model = FixedModel(config, variant=variant)
     fixed = model.to_float(model.run(y))
     # x0's rate as the model holds it: within an LSB of each rounding on its way to the output (the
@@ -62,11 +62,11 @@ def test_positions_from_the_first_sample_rates_from_the_first_two(key, variant):
     assert fixed[rate][1] == 300.0
     # from x0 instead, the first estimate is a blend of x0 and y0
     plain = dataclasses.replace(params, init="state")
-    assert config.spec.reference(plain, variant, y)[pos][0] < 1000.0
+    assert config.spec.model.reference(plain, variant, y)[pos][0] < 1000.0
 
 
 def test_the_acceleration_of_the_tracker_is_held_on_the_first_sample():
-    flt = FilterConfig(filter="kalman", params=STARTS["kalman"][1]).spec.reference(
+    flt = FilterConfig(filter="kalman", params=STARTS["kalman"][1]).spec.model.reference(
         STARTS["kalman"][1], "full", np.array([1000.0, 1003.0, 1001.0]))
     assert flt["x3"][0] == 3.0 and flt["x3"][1] != 3.0
 
@@ -107,7 +107,7 @@ def test_the_roll_predictor_starts_from_three_samples_as_its_paper_does(variant)
     z = np.array([10, 14, 22, 30, 40, 46, 52], dtype=np.int64)
     model = FixedModel(config, variant=variant)
     fixed = model.to_float(model.run(z))
-    for out in (fixed, config.spec.reference(params, variant, z)):
+    for out in (fixed, config.spec.model.reference(params, variant, z)):
         assert [out["pred"][n] for n in range(4)] == [10.0, 14.0, 22.0, 30.0]
         assert (out["pred"][4], out["rate"][4], out["accel"][4]) == (61.0, 24.0, 6.0)
         # filter b: 14, 30, 46: 46 + 16 + 0
@@ -124,7 +124,7 @@ def test_which_cores_run_it(key):
     update form) refuse it, and the folded core runs every one."""
     name, params, _, _ = STARTS[key]
     config = FilterConfig(filter=name, params=params)
-    for variant in config.spec.variants:
+    for variant in config.spec.model.variants:
         if (key, variant) in PARALLEL_STARTS:
             assert config.spec.architectures(variant, params) == ("parallel", "folded")
             continue
@@ -149,7 +149,7 @@ def test_the_start_is_bit_exact_on_the_core(key, variant, architecture, channels
     else:
         name, params, _, _ = STARTS[key]
     config = FilterConfig(filter=name, params=params)
-    _, y = scenarios.for_config(config.spec.scenarios[0], 50, seed, config)
+    _, y = scenarios.for_config(config.spec.model.scenarios[0], 50, seed, config)
     y = np.clip(y + 9000, -32768, 32767)
     result = run(build(simulator, "core", config=config, variant=variant, channels=channels, architecture=architecture),
                  "test_core", testcase="core_bit_exact",

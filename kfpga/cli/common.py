@@ -16,6 +16,7 @@ import numpy as np
 
 from kfpga.core import registry
 from kfpga.core.errors import UsageError
+from kfpga.hw.cores import make_core
 
 EXIT_USAGE = 2
 PLOT_EXTENSIONS = (".png", ".svg", ".pdf")
@@ -130,7 +131,7 @@ def _scenario(args, config):
     """``--scenario``: one the filter knows (its default when not given and no file is)."""
     if not hasattr(args, "scenario") or getattr(args, "input", None):
         return
-    known = config.spec.scenarios
+    known = config.spec.model.scenarios
     if args.scenario is None:
         args.scenario = known[0]
     elif args.scenario not in known:
@@ -142,9 +143,9 @@ def _check_period(config):
     """A model's sample period against the board's rate: refused when the filter's arithmetic uses
     the period (a rate scaled by T would be wrong by their ratio), else a warning."""
     rate, spec = config.board.sample_rate_hz, config.spec
-    if rate is None or spec.period is None:
+    if rate is None or spec.model.period is None:
         return
-    seconds, used = spec.period(config.params)
+    seconds, used = spec.model.period(config.params)
     if abs(rate * seconds - 1.0) <= 0.01:
         return
     text = (f"[model] T = {seconds:g} s is a rate of {1 / seconds:g} Hz, but [board] sample_rate_hz = {rate:g}: "
@@ -227,20 +228,20 @@ def filter_help():
 
 
 def variant_help():
-    parts = [f"{s.name}: {', '.join(s.variants)}" for s in registry.specs()]
+    parts = [f"{s.name}: {', '.join(s.model.variants)}" for s in registry.specs()]
     return f"the filter's variant ({'; '.join(parts)}; default: the first)"
 
 
 def _fields(spec):
     """A filter's output fields for a help text: its own, or, where they follow the model (the
     general filter: one per state and observation), the pattern."""
-    if callable(spec.outputs):
+    if callable(spec.model.outputs):
         return "x1..xn and yhat1..yhatm of its n states and m observations"
     return ", ".join(o.name for o in spec.outputs_for(spec.params()))
 
 
 def out_field_help():
-    parts = [f"{s.name}: {_fields(s)}, default {s.default_output}" for s in registry.specs()]
+    parts = [f"{s.name}: {_fields(s)}, default {s.model.default_output}" for s in registry.specs()]
     return f"the output field that drives out_data ({'; '.join(parts)}); the pin table follows its width"
 
 
@@ -392,7 +393,7 @@ def check_architecture(args, config):
     from kfpga.hw.generate import figures_only
 
     try:
-        figures_only(config.spec.make_core(config, args.variant, architecture="parallel", stages=stages))
+        figures_only(make_core(config, args.variant, architecture="parallel", stages=stages))
     except (ValueError, TypeError) as exc:
         raise UsageError(f"--stages: {exc}") from None
 
@@ -442,7 +443,7 @@ def add_bus_args(p):
 
 def check_bus_args(args, config):
     """``--missing`` on a variant that cannot predict only is refused."""
-    if getattr(args, "missing", False) and config.spec.variants[args.variant].predict is None:
+    if getattr(args, "missing", False) and config.spec.model.variants[args.variant].predict is None:
         raise UsageError(f"--missing: the {config.filter} filter's {args.variant} variant takes every sample as a "
                          "measurement (it has no update without one)")
 
@@ -459,7 +460,7 @@ def add_quiet(p):
 
 
 def _prefilter_specs():
-    return [s for s in registry.specs() if s.prefilter is not None]
+    return [s for s in registry.specs() if s.hardware.prefilter is not None]
 
 
 def add_prefilter_args(p):
@@ -467,12 +468,12 @@ def add_prefilter_args(p):
     specs = _prefilter_specs()
     if not specs:
         return
-    names = [s.name for s in specs] + [a for s in specs for a in s.aliases]
+    names = [s.name for s in specs] + [a for s in specs for a in s.docs.aliases]
     p.add_argument("--prefilter", choices=names, metavar="NAME",
                    help="put a filter between the ADS8364 controller and the core: "
-                        + "; ".join(f"{s.name}: {s.prefilter.summary}" for s in specs))
+                        + "; ".join(f"{s.name}: {s.hardware.prefilter.summary}" for s in specs))
     for s in specs:
-        for option, kwargs in s.prefilter.options.items():
+        for option, kwargs in s.hardware.prefilter.options.items():
             p.add_argument(option, **{**kwargs, "help": f"with --prefilter {s.name}: {kwargs.get('help', '')}"})
 
 
@@ -487,14 +488,14 @@ def prefilter(args):
     name = getattr(args, "prefilter", None)
     chosen = None if name is None else registry.get(name)
     for spec in _prefilter_specs():
-        for option in spec.prefilter.options:
+        for option in spec.hardware.prefilter.options:
             if getattr(args, _option_dest(option), None) is not None and (chosen is None or chosen.name != spec.name):
                 raise UsageError(f"{option} applies with --prefilter {spec.name} only")
     if chosen is None:
         return None
-    values = {_option_dest(o): getattr(args, _option_dest(o), None) for o in chosen.prefilter.options}
+    values = {_option_dest(o): getattr(args, _option_dest(o), None) for o in chosen.hardware.prefilter.options}
     try:
-        params = chosen.prefilter.params(values)
+        params = chosen.hardware.prefilter.params(values)
     except (TypeError, ValueError) as exc:
         raise UsageError(f"--prefilter {chosen.name}: {exc}") from None
     return FilterConfig(filter=chosen.name, params=params)
@@ -600,7 +601,7 @@ def require_word_lengths(config, command):
     """Refuse a filter whose formats have no word length to trade: no multiplier operand, no
     fraction bits of a state (a smoother that selects and averages its samples in their own 16 bits)."""
     spec = config.spec
-    if not any(spec.points[name].operand for name in config.formats):
+    if not any(spec.model.points[name].operand for name in config.formats):
         raise UsageError(f"{command} does not apply to the {spec.name} filter: it has no multiplier operand and no "
                          "fraction bits to trade against error (see kfpga formats)")
 
@@ -627,7 +628,7 @@ def check_channel(args, config=None):
         if len(config.inputs) > 1:
             raise UsageError(f"--channels 6 filters six channels of one input each; this model reads {len(config.inputs)} "
                              f"ADC channels per update ({', '.join(config.inputs)}): use --channels 1")
-        if spec.adc is not None and spec.adc(config.params) is not None:
+        if spec.model.adc is not None and spec.model.adc(config.params) is not None:
             raise UsageError("--channels 6 filters every ADC channel, so the model's adc would be ignored: remove "
                              "adc from [model], or use --channels 1")
         return

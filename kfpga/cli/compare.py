@@ -87,7 +87,7 @@ def _with_prefilter(args, config, pre, truth, y, label):
     from kfpga.core.fixedmodel import FixedModel
     from kfpga.flows.analysis import compare, sample_count
 
-    delay = pre.spec.prefilter.delay
+    delay = pre.spec.hardware.prefilter.delay
     y = np.array(y, dtype=np.int64)
     glitches = 0
     if not args.input:  # a scenario: full-scale glitches at random samples, from the run's seed
@@ -95,7 +95,7 @@ def _with_prefilter(args, config, pre, truth, y, label):
         where = np.flatnonzero(rng.random(len(y)) < GLITCH_DENSITY)
         y[where] = rng.choice([CODE_MIN, CODE_MAX], len(where))
         glitches = len(where)
-    smoothed = FixedModel(pre).run(y).outputs[pre.spec.default_output]
+    smoothed = FixedModel(pre).run(y).outputs[pre.spec.model.default_output]
     late = None if truth is None else np.concatenate([np.repeat(truth[:1], delay), truth[:-delay]])
     runs = {}
     for key, codes, t in (("without", y, truth), ("with", smoothed, late)):

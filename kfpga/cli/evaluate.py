@@ -40,7 +40,7 @@ def add_parser(sub):
         evaluation = spec.load_evaluation()
         if evaluation is None:
             continue
-        q = ev.add_parser(spec.name, aliases=list(spec.aliases), help=evaluation.summary,
+        q = ev.add_parser(spec.name, aliases=list(spec.docs.aliases), help=evaluation.summary,
                           description=evaluation.description, formatter_class=common.ExamplesFormatter,
                           epilog=f"examples:\n  kfpga evaluate {spec.name}                 # seeds 1..20 and the claims\n"
                                  f"  kfpga evaluate {spec.name} --seed 3 --plot build/{spec.name}.png")

@@ -26,7 +26,7 @@ def add_parser(sub):
     p.add_argument("--config", metavar="TOML", help="model parameters and formats")
     p.add_argument("--clip", action="store_true", help="saturate out-of-range inputs instead of failing")
     for spec in registry.specs():
-        for mode in spec.modes:
+        for mode in spec.model.modes:
             p.add_argument(mode.option, **{**mode.argument, "help": f"{spec.name} filter only: {mode.argument['help']}"})
     p.set_defaults(func=run)
 
@@ -36,7 +36,7 @@ def _mode(args, config):
     given for another filter is refused."""
     chosen = None
     for spec in registry.specs():
-        for mode in spec.modes:
+        for mode in spec.model.modes:
             value = getattr(args, mode.dest, None)
             if value is None or value is False:
                 continue
@@ -56,7 +56,7 @@ def run(args):
     config = common.load_config(args)
     chosen = _mode(args, config)
     columns_in = chosen[0].columns(config, chosen[1]) if chosen else config.inputs
-    coasts = not chosen and config.spec.variants[args.variant].predict is not None
+    coasts = not chosen and config.spec.model.variants[args.variant].predict is not None
     try:
         samples = read_samples(args.input, clip=args.clip, columns=columns_in, bits=config.input_format.width,
                                missing=coasts)
@@ -96,6 +96,6 @@ def run(args):
 #: The examples ending ``kfpga filter --help``.
 def EXAMPLES():
     lines = ["kfpga filter --config tracker.toml --input log.csv --output estimates.csv   # empty cells: lost samples"]
-    lines += [f"kfpga filter --filter {spec.name} {mode.example}" for spec in registry.specs() for mode in spec.modes
+    lines += [f"kfpga filter --filter {spec.name} {mode.example}" for spec in registry.specs() for mode in spec.model.modes
               if mode.example]
     return lines

@@ -16,13 +16,13 @@ def add_parser(sub):
 
 
 def run(args):
-    rows = [{"name": s.name, "aliases": list(s.aliases), "summary": s.summary,
-             "variants": {n: v.summary for n, v in s.variants.items()},
+    rows = [{"name": s.name, "aliases": list(s.docs.aliases), "summary": s.docs.summary,
+             "variants": {n: v.summary for n, v in s.model.variants.items()},
              "inputs": [n for n, _ in s.inputs_for(s.params())],
-             "outputs": [o.name for o in s.outputs_for(s.params())], "source": s.source,
-             "outputs_follow_the_model": callable(s.outputs),
-             "presets": {n: summary for n, (summary, _) in s.presets.items()},
-             "evaluation": s.evaluation is not None, "scenarios": list(s.scenarios),
+             "outputs": [o.name for o in s.outputs_for(s.params())], "source": s.docs.source,
+             "outputs_follow_the_model": callable(s.model.outputs),
+             "presets": {n: summary for n, (summary, _) in s.model.presets.items()},
+             "evaluation": s.evaluation is not None, "scenarios": list(s.model.scenarios),
              "default": s.name == registry.DEFAULT} for s in registry.specs()]
     if args.json:
         common.emit_json(rows)

@@ -27,7 +27,7 @@ def _built_bits(config, name, fmt):
     from kfpga.core.formats import constant_values, significant_bits
 
     values = constant_values(config.spec, config.params).get(name)
-    if not config.spec.points[name].constant or not values:
+    if not config.spec.model.points[name].constant or not values:
         return fmt.width
     return max(significant_bits(to_raw(v, fmt)[0]) for v in values)
 
@@ -35,7 +35,7 @@ def _built_bits(config, name, fmt):
 def formats_table(config):
     """Rows describing each quantisation point (``kfpga formats``); ``bits`` is what the point
     costs (a constant: its significant bits, which can be fewer than its format's)."""
-    points = config.spec.points
+    points = config.spec.model.points
     ranges = config.ranges()
     rows = []
     for name, fmt in config.formats.items():
@@ -49,7 +49,7 @@ def formats_table(config):
             "lsb": fmt.lsb,
             "rounding": fmt.rounding.value,
             "overflow": fmt.overflow.value,
-            "variants": ",".join(point.variants or config.spec.variants),
+            "variants": ",".join(point.variants or config.spec.model.variants),
             "multiplier_operand": point.operand,
             "cast": point.cast,
             "description": point.description,
@@ -69,7 +69,7 @@ def budget_lines(config):
     else:
         lines = [f"word budget: formats.max_word = {config.max_word} bits; the {config.filter} filter has no cast points: "
                  "its sums stay exact"]
-    for variant, v in config.spec.variants.items():
+    for variant, v in config.spec.model.variants.items():
         if v.applies(config.params) is not None:
             continue
         wide = config.over_budget(variant)
@@ -100,7 +100,7 @@ def run(args):
         for line in budget_lines(config):
             print(line)
     # the table is only worth writing if the other commands take it: every variant that applies
-    for variant, v in config.spec.variants.items():
+    for variant, v in config.spec.model.variants.items():
         if v.applies(config.params) is None:
             config.require_variant(variant)
     return 0

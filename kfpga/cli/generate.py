@@ -6,6 +6,7 @@ from pathlib import Path
 
 from kfpga.cli import common
 from kfpga.core.errors import UsageError
+from kfpga.hw.cores import make_core
 
 
 def add_parser(sub):
@@ -67,7 +68,7 @@ def _run_core_only(args):
     common.check_bus_args(args, config)
     options = {**({"missing": True} if args.missing else {}), **({"bus": args.bus} if args.bus else {})}
     try:
-        config.spec.make_core(config, args.variant, channels=args.channels, **options,
+        make_core(config, args.variant, channels=args.channels, **options,
                               **({} if args.architecture in (None, "auto") else {"architecture": args.architecture}))
     except ValueError as exc:
         raise UsageError(f"--channels {args.channels}: {exc}") from None
@@ -139,7 +140,7 @@ def _board_testbench(folder, config, args, pre, architecture, sensors, manifest)
 
     from kfpga.sim.testbench import write_testbench
 
-    params = {"seed": 1, "scenario": config.spec.scenarios[0], "adc": list(args.adc) if args.adc else None,
+    params = {"seed": 1, "scenario": config.spec.model.scenarios[0], "adc": list(args.adc) if args.adc else None,
               "channel": args.adc[0] if args.adc and args.channels != 6 else None}
     info = write_testbench(folder / "tb", config, variant=args.variant, six=args.channels == 6, channel=args.channel,
                            samples=300, params=params, prefilter=pre, architecture=architecture, stages=args.stages,
@@ -175,7 +176,7 @@ def _timing(args, config, architecture):
     every = args.candidates or common.explore(config, args.variant, args.channels, quiet=args.quiet, missing=missing,
                                               bus=bus)
     options = {**({"missing": True} if missing else {}), **({"bus": bus} if bus else {})}
-    core = figures_only(config.spec.make_core(config, args.variant, channels=args.channels, architecture=architecture,
+    core = figures_only(make_core(config, args.variant, channels=args.channels, architecture=architecture,
                                               **({} if args.stages is None else {"stages": args.stages}), **options))
     design = next(c for c in every if c.architecture == architecture and c.stages == getattr(core, "stages", None))
     if not design.fits:
@@ -216,7 +217,7 @@ def _print(args, config, field, manifest, pre):
           f"per update; compile with: cd {args.out} && quartus_sh --flow compile {TOP_NAME}")
     if pre is not None:
         print(f"  {pre.filter} pre-filter before the core: {common.describe_params(pre.params)}, "
-              f"{manifest['prefilter']['channels']} channel state(s), {pre.spec.prefilter.delay} samples late, "
+              f"{manifest['prefilter']['channels']} channel state(s), {pre.spec.hardware.prefilter.delay} samples late, "
               f"{manifest['prefilter']['latency_cycles']} cycles of latency")
 
 

@@ -91,7 +91,7 @@ def _variants(args, config):
     if args.variant is not None:
         config.require_variant(args.variant)
         return [args.variant]
-    return [name for name, v in config.spec.variants.items() if v.applies(config.params) is None]
+    return [name for name, v in config.spec.model.variants.items() if v.applies(config.params) is None]
 
 
 def run(args):

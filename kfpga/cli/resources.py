@@ -59,7 +59,8 @@ def _synthesise(args, config):
 def _goals(config, args, results):
     from kfpga.hw.resources import EP2C20
 
-    goals = config.spec.goals(config, args.variant, args.channels)
+    rule = config.spec.hardware.goals
+    goals = {} if rule is None else dict(rule(config, args.variant, args.channels))
     goals.setdefault("m4k_blocks", EP2C20["m4k_blocks"])  # the device's: a design past it cannot be fitted
     core = results["core"]
     met = {k: core[k] <= v for k, v in goals.items()}

@@ -193,7 +193,7 @@ def _print(args, config, pre, summary):
               f"hardware {summary['rmse_hw']:.4f} codes")
     if pre is not None:
         print(f"  {pre.filter} pre-filter {common.describe_params(pre.params)}, each sample "
-              f"{pre.spec.prefilter.delay} late")
+              f"{pre.spec.hardware.prefilter.delay} late")
     if "glitches_injected" in summary:
         after = summary.get("glitches_after_prefilter")
         print(f"  ADC glitches            {summary['glitches_in_reads']} in the reads"

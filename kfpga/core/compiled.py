@@ -310,7 +310,7 @@ def cast_bounds(spec, params, formats, variant, input_format):
     """``{cast point: (lo, hi)}`` (``Fraction``): the interval of the exact value of every cast point that has
     no format in ``formats``, from the formats of the state and the inputs (what the default cast
     formats take their integer bits from: a cast then never overflows)."""
-    v = spec.variants[variant]
+    v = spec.model.variants[variant]
     ops = TraceOps(formats, vector=False)
     k = ops.constants(v.constants(params))
     x = {name: ops.input(f"s_{name}", point, name) for name, point in v.state_for(params)}

@@ -26,7 +26,15 @@ from kfpga.core.ads8364 import CODE_FORMAT
 from kfpga.core.board import Board
 from kfpga.core.errors import ConfigError
 from kfpga.core.fixed import QFormat, bits_for, to_raw
-from kfpga.core.formats import MAX_WORD, MULTIPLIER_BITS, PRECISION, STATE_FRAC_BITS, cast_formats, precision_frac_bits
+from kfpga.core.formats import (
+    MAX_WORD,
+    MULTIPLIER_BITS,
+    PRECISION,
+    STATE_FRAC_BITS,
+    cast_formats,
+    precision_frac_bits,
+    register_formats,
+)
 from kfpga.core.ops import update_widths
 from kfpga.core.spec import Constant
 
@@ -45,7 +53,7 @@ def _registry():
 
 @functools.lru_cache(maxsize=64)
 def _cached_ranges(spec_name, params):
-    return MappingProxyType(_registry().get(spec_name).ranges(params))
+    return MappingProxyType(_registry().get(spec_name).model.ranges(params))
 
 
 def analysed_ranges(params, stimulus=None, *, filter=None):
@@ -58,8 +66,8 @@ def analysed_ranges(params, stimulus=None, *, filter=None):
     if stimulus is None:
         return dict(_cached_ranges(spec.name, params))
     if isinstance(stimulus, dict):
-        return spec.ranges(params, {k: np.atleast_2d(np.asarray(v, dtype=np.float64)) for k, v in stimulus.items()})
-    return spec.ranges(params, np.atleast_2d(np.asarray(stimulus, dtype=np.float64)))
+        return spec.model.ranges(params, {k: np.atleast_2d(np.asarray(v, dtype=np.float64)) for k, v in stimulus.items()})
+    return spec.model.ranges(params, np.atleast_2d(np.asarray(stimulus, dtype=np.float64)))
 
 
 def input_format(params):
@@ -77,8 +85,12 @@ def default_formats(params, *, ranges=None, operand_bits=MULTIPLIER_BITS, state_
     points, a cast point's may be :data:`EXACT`; they are taken as they are)."""
     spec = _registry().spec_for(params, filter)
     ranges = analysed_ranges(params, filter=spec.name) if ranges is None else ranges
-    budget = {"max_word": max_word} if "max_word" in inspect.signature(spec.default_formats).parameters else {}
-    formats = spec.default_formats(params, ranges, operand_bits=operand_bits, state_frac=state_frac, **budget)
+    rules = spec.model.default_formats
+    if rules is None:  # the register and operand rules alone
+        formats = register_formats(spec, params, ranges, operand_bits=operand_bits, state_frac=state_frac, max_word=max_word)
+    else:
+        budget = {"max_word": max_word} if "max_word" in inspect.signature(rules).parameters else {}
+        formats = rules(params, ranges, operand_bits=operand_bits, state_frac=state_frac, **budget)
     pinned = dict(pinned or {})
     formats.update({name: fmt for name, fmt in pinned.items() if fmt != EXACT})
     formats.update(cast_formats(spec, params, formats, ranges, max_word=max_word, input_format=input_format(params),
@@ -169,7 +181,7 @@ class FilterConfig:
     def casts(self):
         """The cast points of this model (a product's or a sum's own result format), in datapath
         order: ``{name: QFormat, or None where the value stays exact}``."""
-        points = self.spec.points
+        points = self.spec.model.points
         return {name: self.formats.get(name) for name in self.spec.points_for(self.params) if points[name].cast}
 
     @property
@@ -198,7 +210,7 @@ class FilterConfig:
 
     def constants(self, variant):
         """``{name: (value, point) | structural}`` of ``variant`` (see :class:`~kfpga.core.spec.Variant`)."""
-        return self.spec.variants[variant].constants(self.params)
+        return self.spec.model.variants[variant].constants(self.params)
 
     def constant_raw(self, variant):
         """``{name: raw int}`` of the quantised constants of ``variant`` (structural entries left out)."""
@@ -213,7 +225,7 @@ class FilterConfig:
 
     def reset_state(self, variant):
         """``{state name: raw int}``: the reset state of ``variant`` in its points' formats."""
-        v = self.spec.variants[variant]
+        v = self.spec.model.variants[variant]
         points = dict(v.state_for(self.params))
         return {name: int(to_raw(value, self.point_format(points[name]))[0]) for name, value in v.initial(self.params).items()}
 
@@ -232,16 +244,16 @@ class FilterConfig:
             ranges = self.ranges()
             for name in (n for n in f if n in ranges):
                 fmt = f[name]
-                reach = max([ranges[name]] + [ranges[n] for n in f if spec.points[n].same_as == name and n in ranges])
+                reach = max([ranges[name]] + [ranges[n] for n in f if spec.model.points[n].same_as == name and n in ranges])
                 if not fmt.covers(reach):
                     raise ConfigError(
                         f"formats.{name} = {fmt} covers ±{fmt.max_value:g}, but the analysed range of "
-                        f"{spec.points[name].description} reaches ±{reach:.6g}: it needs at least "
+                        f"{spec.model.points[name].description} reaches ±{reach:.6g}: it needs at least "
                         f"{bits_for(reach, fmt.frac_bits)} integer bits"
                     )
-        spec.validate(self)
-        for variant in spec.variants:
-            if spec.variants[variant].applies(self.params) is None:
+        spec.model.validate(self)
+        for variant in spec.model.variants:
+            if spec.model.variants[variant].applies(self.params) is None:
                 self._check_widths(variant)
 
     def width_report(self, variant):
@@ -264,10 +276,10 @@ class FilterConfig:
     def require_variant(self, variant):
         """Refuse a variant the filter does not have, or that these parameters cannot use."""
         spec = self.spec
-        if variant not in spec.variants:
-            raise ConfigError(f"variant must be one of {', '.join(spec.variants)} for the {spec.name} filter, "
+        if variant not in spec.model.variants:
+            raise ConfigError(f"variant must be one of {', '.join(spec.model.variants)} for the {spec.name} filter, "
                               f"not {variant!r}")
-        why = spec.variants[variant].applies(self.params)
+        why = spec.model.variants[variant].applies(self.params)
         if why:
             raise ConfigError(why)
         if self.check_ranges:
@@ -276,7 +288,7 @@ class FilterConfig:
     def _check_precision(self, variant):
         """Refuse a constant or reset value that its format holds as 0, or more than
         :data:`PRECISION` off: the model would compute with another filter than the one asked for."""
-        v = self.spec.variants[variant]
+        v = self.spec.model.variants[variant]
         values = [(c.label or name, c.value, c.point) for name, c in self.constants(variant).items()
                   if isinstance(c, Constant)]
         points = dict(v.state_for(self.params))
@@ -364,7 +376,7 @@ class FilterConfig:
             "# kfpga configuration: the filter, its parameters and the format of every quantisation point.",
             "# Formats are Q<integer bits incl. sign>.<fraction bits>.",
             "[filter]",
-            f'name = "{spec.name}"  # {spec.summary}',
+            f'name = "{spec.name}"  # {spec.docs.summary}',
             "",
             "[model]",
         ]
@@ -386,7 +398,7 @@ class FilterConfig:
             if fmt is None and name not in self.pinned:
                 continue  # a cast point that keeps its value exact by default
             mark = "" if formats or name in self.pinned else "# "
-            lines += ["", f"{mark}[formats.{name}]  # {spec.points[name].description}"]
+            lines += ["", f"{mark}[formats.{name}]  # {spec.model.points[name].description}"]
             if fmt is None:
                 lines.append(f'{mark}format = "{EXACT}"')
                 continue
@@ -398,16 +410,16 @@ class FilterConfig:
 def _check_given(spec, names, given):
     """Refuse a given format for a point the model does not have, or that is not a format."""
     for name, fmt in given.items():
-        if name not in spec.points:
-            known = [n for n in names if not spec.points[n].cast]
+        if name not in spec.model.points:
+            known = [n for n in names if not spec.model.points[n].cast]
             casts = "" if len(known) == len(names) else " and its cast points (kfpga formats lists them)"
             raise ConfigError(f"formats.{name}: unknown quantisation point; this model has {', '.join(known)}{casts}")
         if name not in names:
             raise ConfigError(f"formats.{name}: this {spec.name} model has no point {name} "
-                              f"({spec.points[name].description})")
-        if fmt == EXACT and not spec.points[name].cast:
+                              f"({spec.model.points[name].description})")
+        if fmt == EXACT and not spec.model.points[name].cast:
             raise ConfigError(f"formats.{name} = \"exact\": only a cast point (a product's or a sum's own format) "
-                              f"can keep its value exact; {name} is a {spec.points[name].role}")
+                              f"can keep its value exact; {name} is a {spec.model.points[name].role}")
         if not isinstance(fmt, QFormat) and fmt != EXACT:
             raise ConfigError(f"formats.{name} must be a QFormat, not {fmt!r}")
 

@@ -90,7 +90,7 @@ class FixedModel:
         self.spec = self.config.spec
         self.variant = self.spec.default_variant if variant is None else variant
         self.config.require_variant(self.variant)
-        self._v = self.spec.variants[self.variant]
+        self._v = self.spec.model.variants[self.variant]
         self.inputs = self.config.inputs
         self.outputs = self.config.output_names
         self.state = self._v.state_for(self.config.params)

@@ -120,7 +120,7 @@ def constant_values(spec, params):
     from kfpga.core.spec import Constant
 
     out = {}
-    for variant in spec.variants.values():
+    for variant in spec.model.variants.values():
         if variant.applies(params):
             continue
         for c in variant.constants(params).values():
@@ -135,7 +135,7 @@ def precision_needs(spec, params):
     from kfpga.core.spec import Constant
 
     needs = {}
-    for variant in spec.variants.values():
+    for variant in spec.model.variants.values():
         if variant.applies(params):
             continue
         points = dict(variant.state_for(params))
@@ -190,7 +190,7 @@ def register_formats(spec, params, ranges, *, operand_bits=MULTIPLIER_BITS, stat
     ``noise``: ``{register point: rms error of the float filter there}``; such a register also
     gets the fraction bits whose rounding adds at most 1 % to that error (:func:`noise_step_frac`).
     """
-    points = spec.points
+    points = spec.model.points
     names = [name for name in spec.points_for(params) if not points[name].cast]
     formats = {}
     guard = {name: 0 if points[name].constant else GUARD_BITS for name in names}
@@ -259,8 +259,8 @@ def cast_formats(spec, params, formats, ranges, *, max_word=MAX_WORD, input_form
     from kfpga.core.ops import update_widths
 
     casts = {}
-    variants = [name for name, v in spec.variants.items() if v.applies(params) is None]
-    for _ in range(len(spec.points) + 1):
+    variants = [name for name, v in spec.model.variants.items() if v.applies(params) is None]
+    for _ in range(len(spec.model.points) + 1):
         wanted, bounds = {}, {}
         for variant in variants:
             current = {**formats, **casts}

@@ -770,7 +770,7 @@ class CostOps(Ops):
 def update_cost(config, variant):
     """``{additions, multiplications, shifts, divisions}`` of one update of ``config``'s ``variant``,
     counted by running its update on :class:`CostOps`."""
-    spec_variant = config.spec.variants[variant]
+    spec_variant = config.spec.model.variants[variant]
     ops = CostOps(config.formats)
     k = ops.constants(config.constants(variant))
     state = {name: ops.input(0, point, name) for name, point in spec_variant.state_for(config.params)}
@@ -782,7 +782,7 @@ def update_cost(config, variant):
 def update_widths(spec, params, formats, variant, input_format):
     """What :class:`WidthOps` finds in the update of ``spec``'s ``variant`` with ``formats`` (the
     inputs in ``input_format``): a :class:`WidthReport`."""
-    v = spec.variants[variant]
+    v = spec.model.variants[variant]
     ops = WidthOps(formats)
     k = ops.constants(v.constants(params))
     x = {name: ops.input(None, point, name) for name, point in v.state_for(params)}

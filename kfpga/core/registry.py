@@ -2,6 +2,10 @@
 group, each ``NAME = "module:SPEC"`` naming the filter's :class:`~kfpga.core.spec.FilterSpec`
 (kfpga's own in ``pyproject.toml``). Adding a filter adds its files and one entry point.
 
+A filter with a parallel core of its own also names it in the ``kfpga.cores`` group,
+``NAME = "module:make_core"`` (a factory in ``hw/``, imported only when hardware is built); the
+folded core runs every filter.
+
 Every command (``--filter NAME``), the manifest, the scoreboard, the cocotb benches and the
 contract tests iterate over this registry; nothing else lists the filters.
 """
@@ -12,17 +16,21 @@ from importlib import metadata
 
 from kfpga.core.spec import resolve
 
-__all__ = ["GROUP", "DEFAULT", "get", "names", "specs", "spec_for", "register", "unregister", "aliases", "canonical",
-           "presets", "preset", "coasting", "example", "reload"]
+__all__ = ["GROUP", "CORES", "DEFAULT", "get", "names", "specs", "spec_for", "core_target", "register", "unregister",
+           "aliases", "canonical", "presets", "preset", "coasting", "example", "reload"]
 
 #: The entry-point group a distribution registers its filters in.
 GROUP = "kfpga.filters"
+#: The entry-point group of the filters' parallel cores.
+CORES = "kfpga.cores"
 #: The paper's filter, used when a config or command names none.
 DEFAULT = "kalman2"
 
 _targets = None  # name -> "module:attribute" of the installed filters, in the order they are found
 _loaded = {}  # name -> FilterSpec: the specs imported so far, and those added by register()
 _added = set()  # the names register() added
+_cores = None  # name -> "module:attribute" of the parallel cores' factories (installed, then registered)
+_added_cores = {}  # name -> the factory register() gave
 
 
 def _installed():
@@ -46,23 +54,37 @@ def _installed():
     return _targets
 
 
+def core_target(name):
+    """The factory of the parallel core of the filter ``name`` (a ``"module:attribute"`` string of
+    the ``kfpga.cores`` group, or the callable :func:`register` was given), or ``None``."""
+    global _cores
+    if name in _added_cores:
+        return _added_cores[name]
+    if _cores is None:
+        _cores = {ep.name: ep.value for ep in metadata.entry_points(group=CORES)}
+    return _cores.get(name)
+
+
 def reload():
     """Read the entry points again (a distribution installed or put on ``sys.path`` since); the
     filters added by :func:`register` stay."""
-    global _targets
-    _targets = None
+    global _targets, _cores
+    _targets = _cores = None
     for name in [n for n in _loaded if n not in _added]:
         del _loaded[name]
 
 
-def register(spec):
-    """Add a filter at run time (a user's own spec); its name and aliases must be new."""
+def register(spec, *, core=None):
+    """Add a filter at run time (a user's own spec); its name and aliases must be new. ``core``:
+    the factory of its parallel core, if it has one (``f(config, variant, *, channels)``)."""
     taken = set(names()) | set(aliases())
-    for name in (spec.name, *spec.aliases):
+    for name in (spec.name, *spec.docs.aliases):
         if name in taken:
             raise ValueError(f"a filter named {name!r} is already registered")
     _loaded[spec.name] = spec
     _added.add(spec.name)
+    if core is not None:
+        _added_cores[spec.name] = core
 
 
 def unregister(name):
@@ -71,6 +93,7 @@ def unregister(name):
         raise ValueError(f"{name!r} is an installed filter (an entry point of {GROUP!r})")
     _loaded.pop(name, None)
     _added.discard(name)
+    _added_cores.pop(name, None)
 
 
 def _load(name):
@@ -84,7 +107,7 @@ def _load(name):
 
 def aliases():
     """``{alias: name}`` of every registered filter."""
-    return {alias: spec.name for spec in specs() for alias in spec.aliases}
+    return {alias: spec.name for spec in specs() for alias in spec.docs.aliases}
 
 
 def canonical(name):
@@ -126,7 +149,7 @@ def spec_for(params, filter=None):
 
 def coasting():
     """The filters one of whose variants can predict only (a sample with no measurement)."""
-    return [spec.name for spec in specs() if any(v.predict is not None for v in spec.variants.values())]
+    return [spec.name for spec in specs() if any(v.predict is not None for v in spec.model.variants.values())]
 
 
 def example(has=lambda spec: True, skip=0):
@@ -140,7 +163,7 @@ def presets():
     """``{preset: (filter, summary)}`` over every registered filter, in registry order."""
     out = {}
     for spec in specs():
-        for name, (summary, _) in spec.presets.items():
+        for name, (summary, _) in spec.model.presets.items():
             if name in out:
                 raise ValueError(f"preset {name!r} is defined by both the {out[name][0]} and the {spec.name} filter")
             out[name] = (spec.name, summary)
@@ -153,4 +176,4 @@ def preset(name):
     if name not in known:
         raise KeyError(f"no preset named {name!r}; presets: {', '.join(known)}")
     filter_name = known[name][0]
-    return filter_name, get(filter_name).presets[name][1]()
+    return filter_name, get(filter_name).model.presets[name][1]()

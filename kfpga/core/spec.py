@@ -1,33 +1,33 @@
 """What a filter is: the description every layer (model, RTL, CLI, benches, tests) reads.
 
-A filter is a :class:`FilterSpec` in the registry (``kfpga/core/registry.py``). Its arithmetic is
-written once, as stage functions over an ``ops`` object (``kfpga/core/ops.py``); the spec names the
-quantisation points those functions write, the state they carry, the outputs they give, and
-the pieces that cannot be derived: the float reference, the default-format rules, the core.
+A filter is a :class:`FilterSpec` in the registry (``kfpga/core/registry.py``), in four parts: its
+:class:`Docs` (names, summary, source), its :class:`Model` (points, state, update, float reference),
+its :class:`Hardware` (resource goals, the designs of the mutation and formal runs, a pre-filter's
+place on the board) and its :class:`Evaluation`. Its arithmetic is written once, as stage functions
+over an ``ops`` object (``kfpga/core/ops.py``); everything else a small filter leaves out has a
+default.
 """
 
 from __future__ import annotations
 
 import importlib
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import NamedTuple
 
-__all__ = ["Point", "Output", "Variant", "FilterSpec", "Constant", "Evaluation", "Mode", "Prefilter", "MutationBlock",
-           "resolve", "ARCHITECTURES", "FOLDED_CORE"]
+__all__ = ["Point", "Output", "Variant", "FilterSpec", "Docs", "Model", "Hardware", "Constant", "Evaluation", "Mode",
+           "Prefilter", "MutationBlock", "Build", "resolve", "ARCHITECTURES"]
 
 #: The architectures a core can have: ``parallel`` (a filter's own core: its update spread over
 #: pipeline stages, channels interleaved) and ``folded`` (``hw/folded.py``: the update as microcode,
 #: one multiply-accumulate step at a time on one 18 x 18 multiplier, the state in block memory).
 ARCHITECTURES = ("parallel", "folded")
-#: The folded core runs any update the operations layer writes: every filter and variant has it.
-FOLDED_CORE = "kfpga.hw.folded:make_core"
 
 
 def resolve(target):
-    """``target`` itself, or the object a ``"module:attribute"`` string names (imported on first use,
-    so that a layer below never imports the one that holds it)."""
+    """``target`` itself, or the object a ``"module:attribute"`` string names (an entry point's
+    value, or an evaluation in its filter's own layer), imported on first use."""
     if not isinstance(target, str):
         return target
     module, _, attribute = target.partition(":")
@@ -272,7 +272,166 @@ class MutationBlock:
     variant: str
     signal: Mapping
     channels: int = 1
-    make: Callable | None = None  # make() -> the core; default: the spec's core of ``config``
+
+
+class Build(NamedTuple):
+    """A core to elaborate: ``config`` on ``variant`` with ``channels`` channel states, on
+    ``architecture`` (``None``: each that runs it), ``options`` for the core (``stages``, ...)."""
+
+    config: object
+    variant: str
+    channels: int = 1
+    architecture: str | None = None
+    options: Mapping = MappingProxyType({})
+
+
+def _no_check(config):
+    return None
+
+
+@dataclass(frozen=True)
+class Docs:
+    """How a filter is named and described.
+
+    Parameters
+    ----------
+    summary:
+        One line for ``kfpga filters``.
+    source:
+        The document it comes from (a key of the manual's references, ``[Zhong]: ...``).
+    aliases:
+        Other names users type for it (``--filter``, ``[filter] name``, ``kfpga evaluate``).
+    """
+
+    summary: str
+    source: str
+    aliases: tuple = ()
+
+
+@dataclass(frozen=True)
+class Model:
+    """A filter's bit-accurate model: its points, state, update and float reference.
+
+    Required
+    --------
+    points:
+        Its quantisation points (:class:`Point`), ``{name: Point}`` in datapath order.
+    outputs:
+        Its output fields (:class:`Output`), in order; or ``outputs(params) -> that``.
+    variants:
+        ``{name: Variant}``; the first is the default.
+    reference:
+        ``reference(params, variant, y) -> {output: float array}``: the float filter.
+    ranges:
+        ``ranges(params, stimulus=None) -> {point: largest magnitude}`` from float runs
+        (``kfpga.model.ranges.float_ranges`` runs the variants on a stimulus).
+
+    With defaults
+    -------------
+    inputs:
+        ``((name, description), ...)``: the samples of one update, each a 16-bit ADC code; or
+        ``inputs(params) -> that``. Default: one input ``y``.
+    default_output:
+        The output that drives ``out_data`` on the board; default: the first.
+    points_for:
+        ``points_for(params) -> names``: the points a config of these parameters has; default:
+        every point.
+    default_formats:
+        ``default_formats(params, ranges, *, operand_bits, state_frac, max_word) -> {point: QFormat}``
+        (``max_word``, the word budget, may be left out of the signature; the cast points' formats
+        are the config's, from :func:`~kfpga.core.formats.cast_formats`); default: the register and
+        operand rules of :func:`~kfpga.core.formats.register_formats`.
+    validate:
+        ``validate(config)``: checks beyond formats and widths (raises ``ConfigError``); default: none.
+    random_params:
+        ``random_params(rng) -> params``: valid random parameters for the contract tests' random
+        configs (the formats around them are randomised by the tests); default: the defaults.
+    scenario:
+        ``scenario(name, n, seed, params) -> (truth of the default output, codes)``: the test
+        signals of ``compare``, ``sweep`` and ``simulate`` (``codes`` an array for one input,
+        else ``{input: array}``); ``None`` uses ``model/scenarios.py`` on one input.
+    scenarios:
+        The names its ``scenario`` hook (or the generic scenarios) knows, the default first.
+    presets:
+        ``{name: (summary, params factory)}``: named models, ``--preset NAME``.
+    measured:
+        ``measured(params) -> input name | None``: the input that observes the default output
+        itself, whose error is the "raw" RMSE of ``compare``; ``None`` takes the only input of a
+        one-input filter.
+    adc:
+        ``adc(params) -> (channel per input) | None``: the ADS8364 channels the parameters name
+        for the inputs; ``None`` leaves them to the board's defaults.
+    error_std:
+        ``error_std(params) -> {output: std}``: the float filter's steady-state error of each
+        output (input units), the yardstick of the outputs no truth comes with (``propose``).
+    period:
+        ``period(params) -> (seconds, used)``: the sample period the model is made for, and whether
+        its arithmetic uses it (a rate scaled by T) or only describes it; ``None``: the model has
+        no period (a board rate is then its own choice).
+    modes:
+        Its extra forms of ``kfpga filter`` (:class:`Mode`).
+    """
+
+    points: Mapping
+    outputs: tuple
+    variants: Mapping
+    reference: Callable
+    ranges: Callable
+    inputs: tuple = (("y", "the sample (a 16-bit ADC code)"),)
+    default_output: str | None = None
+    points_for: Callable | None = None
+    default_formats: Callable | None = None
+    validate: Callable = _no_check
+    random_params: Callable | None = None
+    scenario: Callable | None = None
+    scenarios: tuple = ("sine", "random-accel", "model")
+    presets: Mapping = field(default_factory=dict)
+    measured: Callable | None = None
+    adc: Callable | None = None
+    error_std: Callable | None = None
+    period: Callable | None = None
+    modes: tuple = ()
+
+    def __post_init__(self):
+        object.__setattr__(self, "points", MappingProxyType(dict(self.points)))
+        object.__setattr__(self, "variants", MappingProxyType(dict(self.variants)))
+        object.__setattr__(self, "presets", MappingProxyType(dict(self.presets)))
+
+
+@dataclass(frozen=True)
+class Hardware:
+    """What the hardware layers need of a filter beyond its model; every part has a default.
+
+    Its parallel core, if it has one, is an entry point of the ``kfpga.cores`` group naming the
+    core's factory in ``hw/`` (``f(config, variant, *, channels)``); the folded core runs every
+    filter (``kfpga.hw.cores.make_core`` builds either).
+
+    Parameters
+    ----------
+    goals:
+        ``goals(config, variant, channels) -> {"logic_cells": n, "mul18": n, "lut_levels": n}``: the
+        resource goals of the core with ``channels`` channel states; ``None``: none beyond the device's.
+    mutation:
+        ``mutation() -> [MutationBlock, ...]``: its cores for ``make mutate``.
+    formal_config:
+        ``formal_config() -> FilterConfig``: a narrow instance for the formal stream-contract
+        checks (``make formal``), for a core whose default datapath is too wide for the solver at
+        the depth its pipeline needs; its handshake logic must not depend on the formats.
+        ``None``: the default config.
+    coverage:
+        ``coverage() -> {label: FilterConfig | Build}``: designs beyond its defaults and presets
+        whose cores take other branches (a sample period that is not a power of two, another core
+        class), elaborated for the source-level mutants (``make mutate-source``): a config on every
+        variant and architecture, a :class:`Build` as it is.
+    prefilter:
+        A :class:`Prefilter` if it can stand before another filter on the board.
+    """
+
+    goals: Callable | None = None
+    mutation: Callable | None = None
+    formal_config: Callable | None = None
+    coverage: Callable | None = None
+    prefilter: Prefilter | None = None
 
 
 @dataclass(frozen=True)
@@ -281,143 +440,63 @@ class FilterSpec:
 
     Parameters
     ----------
-    name, summary, source:
-        ``--filter`` name (the stem of its files in every layer), one line for ``kfpga filters``,
-        the document it comes from.
+    name:
+        ``--filter`` name (the stem of its files in every layer).
     params:
         Its parameters: a keyword-only dataclass that validates itself (``TypeError`` for a
         wrong type, ``ValueError`` for a wrong value). The defaults are the source's.
-    points:
-        Its quantisation points, in datapath order.
-    inputs:
-        ``((name, description), ...)``: the samples of one update, each a 16-bit ADC code; or
-        ``inputs(params) -> that`` when they depend on the parameters.
-    outputs:
-        Its output fields, in order; or ``outputs(params) -> that``.
-    variants:
-        ``{name: Variant}``; the first is the default.
-    points_for:
-        ``points_for(params) -> names``: the points a config of these parameters has.
-    default_formats:
-        ``default_formats(params, ranges, *, operand_bits, state_frac, max_word) -> {point: QFormat}``
-        (``max_word``, the word budget, may be left out of the signature; the cast points' formats
-        are the config's, from :func:`~kfpga.core.formats.cast_formats`).
-    ranges:
-        ``ranges(params, stimulus=None) -> {point: largest magnitude}`` from float runs.
-    validate:
-        ``validate(config)``: checks beyond formats and widths (raises ``ConfigError``).
-    reference:
-        ``reference(params, variant, y) -> {output: float array}``: the float filter.
-    core:
-        The parallel core: ``"module:function"`` building it, ``f(config, variant, *, channels)``,
-        imported only when hardware is asked for (the model never imports ``hw/``); ``None`` for
-        a filter that has only the folded core (``FOLDED_CORE``), which every filter has.
-    goals:
-        ``goals(config, variant, channels) -> {"logic_cells": n, "mul18": n, "lut_levels": n}``: the
-        resource goals of the core with ``channels`` channel states.
-    default_output:
-        The output that drives ``out_data`` on the board by default.
-    random_params:
-        ``random_params(rng) -> params``: valid random parameters, for the contract tests'
-        random configs (the formats around them are randomised by the tests).
-    scenario:
-        ``scenario(name, n, seed, params) -> (truth of the default output, codes)``: the test
-        signals of ``compare``, ``sweep`` and ``simulate`` (``codes`` an array for one input,
-        else ``{input: array}``); ``None`` uses ``model/scenarios.py`` on one input.
-    presets:
-        ``{name: (summary, params factory)}``: named models, ``--preset NAME``.
-    measured:
-        ``measured(params) -> input name | None``: the input that observes the default output
-        itself, whose error is the "raw" RMSE of ``compare``; ``None`` (the default) takes the
-        only input of a one-input filter.
-    adc:
-        ``adc(params) -> (channel per input) | None``: the ADS8364 channels the parameters name
-        for the inputs; ``None`` (or no hook) leaves them to the board's defaults.
-    error_std:
-        ``error_std(params) -> {output: std}``: the float filter's steady-state error of each
-        output (input units), the yardstick of the outputs no truth comes with (``propose``).
-    aliases:
-        Other names users type for it (``--filter``, ``[filter] name``, ``kfpga evaluate``).
+    docs:
+        Its :class:`Docs`: summary, source document, aliases.
+    model:
+        Its :class:`Model`.
+    hardware:
+        Its :class:`Hardware` (default: none of its parts).
     evaluation:
         Its source document's evaluation: an :class:`Evaluation`, or ``"module:attribute"`` naming
-        one (imported when ``kfpga evaluate`` is run); ``None``: it has none.
-    modes:
-        Its extra forms of ``kfpga filter`` (:class:`Mode`).
-    prefilter:
-        A :class:`Prefilter` if it can stand before another filter on the board.
-    mutation:
-        ``mutation() -> [MutationBlock, ...]``: its cores for ``make mutate``.
-    scenarios:
-        The names its ``scenario`` hook (or the generic scenarios) knows, the default first.
-    period:
-        ``period(params) -> (seconds, used)``: the sample period the model is made for, and whether
-        its arithmetic uses it (a rate scaled by T) or only describes it; ``None``: the model has
-        no period (a board rate is then its own choice).
-    formal_config:
-        ``formal_config() -> FilterConfig``: a narrow instance for the formal stream-contract
-        checks (``make formal``), for a core whose default datapath is too wide for the solver at
-        the depth its pipeline needs; its handshake logic must not depend on the formats.
-        ``None``: the default config.
-    coverage:
-        ``coverage() -> {label: FilterConfig | make}``: designs beyond its defaults and presets whose
-        cores take other branches (a sample period that is not a power of two, another core class),
-        elaborated for the source-level mutants (``make mutate-source``): a config on every
-        variant and architecture, a ``make() -> core`` as it is.
+        one in its own layer (imported when ``kfpga evaluate`` is run); ``None``: it has none.
     """
 
     name: str
-    summary: str
-    source: str
     params: type
-    points: Mapping
-    inputs: tuple
-    outputs: tuple
-    variants: Mapping
-    points_for: Callable
-    default_formats: Callable
-    ranges: Callable
-    validate: Callable
-    reference: Callable
-    core: object
-    goals: Callable
-    default_output: str
-    random_params: Callable
-    scenario: Callable | None = None
-    presets: Mapping = field(default_factory=dict)
-    measured: Callable | None = None
-    adc: Callable | None = None
-    error_std: Callable | None = None
-    formal_config: Callable | None = None
-    aliases: tuple = ()
+    docs: Docs
+    model: Model
+    hardware: Hardware = Hardware()
     evaluation: object = None
-    modes: tuple = ()
-    prefilter: Prefilter | None = None
-    mutation: Callable | None = None
-    period: Callable | None = None
-    coverage: Callable | None = None
-    scenarios: tuple = ("sine", "random-accel", "model")
 
     def __post_init__(self):
-        object.__setattr__(self, "points", MappingProxyType(dict(self.points)))
-        object.__setattr__(self, "variants", MappingProxyType(dict(self.variants)))
-        object.__setattr__(self, "presets", MappingProxyType(dict(self.presets)))
+        for part, kind in (("docs", Docs), ("model", Model), ("hardware", Hardware)):
+            if not isinstance(getattr(self, part), kind):
+                raise TypeError(f"{part} must be a {kind.__name__}, not {getattr(self, part)!r}")
         names = [o.name for o in self.outputs_for(self.params())]
-        if self.default_output not in names:
-            raise ValueError(f"default_output must be one of {', '.join(names)}, not {self.default_output!r}")
+        if self.model.default_output is None:
+            object.__setattr__(self, "model", replace(self.model, default_output=names[0]))
+        if self.model.default_output not in names:
+            raise ValueError(f"default_output must be one of {', '.join(names)}, not {self.model.default_output!r}")
 
     def inputs_for(self, params):
         """``((name, description), ...)`` of a model with these parameters."""
-        return tuple(self.inputs(params) if callable(self.inputs) else self.inputs)
+        inputs = self.model.inputs
+        return tuple(inputs(params) if callable(inputs) else inputs)
 
     def outputs_for(self, params):
         """The output fields of a model with these parameters."""
-        return tuple(self.outputs(params) if callable(self.outputs) else self.outputs)
+        outputs = self.model.outputs
+        return tuple(outputs(params) if callable(outputs) else outputs)
+
+    def points_for(self, params):
+        """The names of the points a config of these parameters has."""
+        model = self.model
+        return list(model.points) if model.points_for is None else list(model.points_for(params))
+
+    def random_params(self, rng):
+        """Valid random parameters (the defaults when the model draws none)."""
+        return self.params() if self.model.random_params is None else self.model.random_params(rng)
 
     def adc_channels(self, params, channel=None):
         """The ADC channel of each input on the board: the parameters' own, else ``channel``
         (default 0) for one input, 0, 1, ... for several. A ``channel`` that contradicts the
         parameters raises ``ValueError``."""
-        given = self.adc(params) if self.adc is not None else None
+        given = self.model.adc(params) if self.model.adc is not None else None
         count = len(self.inputs_for(params))
         if given is not None:
             if channel is not None and tuple(given) != (channel,):
@@ -433,19 +512,25 @@ class FilterSpec:
 
     def measured_input(self, params):
         """The input that observes the default output directly, or ``None``."""
-        if self.measured is not None:
-            return self.measured(params)
+        if self.model.measured is not None:
+            return self.model.measured(params)
         names = self.inputs_for(params)
         return names[0][0] if len(names) == 1 else None
 
     @property
     def default_variant(self):
-        return next(iter(self.variants))
+        return next(iter(self.model.variants))
 
+    @property
+    def parallel(self):
+        """Whether it has a parallel core of its own (an entry point of ``kfpga.cores``)."""
+        from kfpga.core import registry  # the registry imports this module
+
+        return registry.core_target(self.name) is not None
 
     def architectures(self, variant, params):
         """The architectures that run ``variant`` with ``params``, the parallel one first when it can."""
-        parallel = self.core is not None and self.variants[variant].hardware(params) is None
+        parallel = self.parallel and self.model.variants[variant].hardware(params) is None
         return ("parallel", "folded") if parallel else ("folded",)
 
     def why_not(self, variant, params, architecture):
@@ -454,28 +539,9 @@ class FilterSpec:
             return f"architecture must be one of {', '.join(ARCHITECTURES)}, not {architecture!r}"
         if architecture in self.architectures(variant, params):
             return None
-        if self.core is None:
+        if not self.parallel:
             return f"the {self.name} filter has no parallel core: it runs on the folded core"
-        return self.variants[variant].hardware(params)
-
-    def make_core(self, config, variant, *, channels=1, architecture=None, **options):
-        """The Amaranth core of ``variant`` on ``architecture`` (default: the parallel core where it
-        runs, else the folded one; the RTL module is imported on first use); ``options`` go to
-        the core (``stages=L`` for a pipelined loop; ``missing=True``, the input's no-measurement
-        bit, and ``bus="avalon"`` or ``"axi4lite"``, the register slave: the folded core only)."""
-        folded_only = [name for name in ("missing", "bus") if options.get(name)]
-        if folded_only and architecture == "parallel":
-            raise ValueError(f"{' and '.join(folded_only)} apply to the folded core, not the parallel one")
-        if folded_only:
-            architecture = "folded"
-        else:
-            options = {k: v for k, v in options.items() if k not in ("missing", "bus")}
-        architecture = architecture or self.architectures(variant, config.params)[0]
-        why = self.why_not(variant, config.params, architecture)
-        if why:
-            raise ValueError(why)
-        target = self.core if architecture == "parallel" else FOLDED_CORE
-        return resolve(target)(config, variant, channels=channels, **options)
+        return self.model.variants[variant].hardware(params)
 
     def load_evaluation(self):
         """Its :class:`Evaluation`, or ``None``."""

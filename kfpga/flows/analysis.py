@@ -66,7 +66,7 @@ def float_run(config, variant, y, missing=None):
     float64 (:func:`coast_float_run`): the reference functions take every sample as a measurement."""
     if missing is not None and np.any(missing):
         return coast_float_run(config, variant, y, missing)
-    return config.spec.reference(config.params, variant, y)
+    return config.spec.model.reference(config.params, variant, y)
 
 
 def coast_float_run(config, variant, y, missing):
@@ -75,7 +75,7 @@ def coast_float_run(config, variant, y, missing):
     for a variant that takes every sample as a measurement."""
     from kfpga.core.ops import FloatOps
 
-    v = config.spec.variants[variant]
+    v = config.spec.model.variants[variant]
     if v.predict is None:
         raise ValueError(f"the {config.spec.name} filter's {variant} variant takes every sample as a measurement: "
                          "missing samples do not apply")
@@ -138,7 +138,7 @@ def compare(config, variant, y, truth=None, *, settle=None, seed=None, scenario=
     res = model.run(y)
     fixed = model.to_float(res)
     flt = float_run(config, variant, y)
-    main = config.spec.default_output
+    main = config.spec.model.default_output
     fx1, flx1 = fixed[main], flt[main]
     startup = startup_samples(flx1, truth) if truth is not None else None
     if settle is None:  # past the start-up, when it was measured and took more than the default
@@ -201,7 +201,7 @@ def limit_cycles(config, variant, *, samples=LIMIT_CYCLE_SAMPLES, window=LIMIT_C
     formats: a search passes one dict for all its candidates).
     """
     model = FixedModel(config, variant=variant)
-    main = config.spec.default_output
+    main = config.spec.model.default_output
     names = config.inputs
     driven = config.spec.measured_input(config.params) or names[0]
     k = np.arange(samples)
@@ -233,7 +233,7 @@ def precision_warnings(config, budget=0.01):
     (``FilterSpec.error_std``), that is, whose rms rounding noise exceeds
     ``sqrt((1 + budget)**2 - 1)`` (14 % for 1 %) of that error."""
     spec = config.spec
-    std = spec.error_std(config.params) if spec.error_std else None
+    std = spec.model.error_std(config.params) if spec.model.error_std else None
     if not std:
         return []
     share = math.sqrt((1.0 + budget) ** 2 - 1.0)

@@ -31,6 +31,7 @@ import numpy as np
 
 from kfpga import __version__
 from kfpga.core.fixedmodel import FixedModel
+from kfpga.hw.cores import make_core
 from kfpga.hw.generate import figures_only, finish_with_status, to_verilog, write_lint_waivers
 
 __all__ = ["check_prefix", "interface", "write_core", "write_core_testbench", "core_icarus_command", "fusesoc_core",
@@ -165,7 +166,7 @@ def _bus_ties(core):
 def _make(config, variant, channels, architecture, stages, missing=False, bus=None):
     options = {"architecture": architecture, **({} if stages is None else {"stages": stages}),
                **({"missing": True} if missing else {}), **({"bus": bus} if bus else {})}
-    return config.spec.make_core(config, variant, channels=channels, **options)
+    return make_core(config, variant, channels=channels, **options)
 
 
 def write_core(out_dir, config, *, variant, prefix, channels=1, architecture=None, stages=None, samples=500, seed=1,
@@ -363,7 +364,7 @@ def write_core_testbench(out_dir, config, *, variant, prefix, channels=1, archit
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     core = figures_only(_make(config, variant, channels, architecture, stages, missing, bus))  # its figures only
-    scenario = scenario or config.spec.scenarios[0]
+    scenario = scenario or config.spec.model.scenarios[0]
     order, codes = _stimulus(config, channels, samples, seed, scenario)
     # with the missing bit: a fifth of the samples marked (their codes not read)
     lost = np.random.default_rng(seed + 11).random(samples) < MISSING_SHARE if missing else np.zeros(samples, bool)

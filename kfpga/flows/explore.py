@@ -28,6 +28,8 @@ import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from kfpga.hw.cores import make_core
+
 __all__ = ["Candidate", "candidates", "choose", "bus_cost", "FMAX_MARGIN", "MAX_STAGES", "BUS_GOAL_LOGIC_CELLS"]
 
 #: The estimate must beat the clock by this factor: it is an estimate (FloPoCo's delays, no
@@ -141,13 +143,13 @@ def _designs(config, variant, channels, missing=False, bus=None):
     options = {**({"missing": True} if missing else {}), **({"bus": bus} if bus else {})}
     for architecture in spec.architectures(variant, config.params):
         if architecture == "folded":
-            out.append((architecture, None, figures_only(spec.make_core(config, variant, channels=channels,
+            out.append((architecture, None, figures_only(make_core(config, variant, channels=channels,
                                                                         architecture=architecture, **options))))
             continue
         if options:
             continue
         try:
-            default = figures_only(spec.make_core(config, variant, channels=channels, architecture=architecture))
+            default = figures_only(make_core(config, variant, channels=channels, architecture=architecture))
         except ValueError:
             continue  # the parallel core does not hold this many channel states
         if not hasattr(default, "stages"):
@@ -155,7 +157,7 @@ def _designs(config, variant, channels, missing=False, bus=None):
             continue
         for stages in range(1, MAX_STAGES + 1):
             try:
-                core = spec.make_core(config, variant, channels=channels, architecture=architecture, stages=stages)
+                core = make_core(config, variant, channels=channels, architecture=architecture, stages=stages)
             except ValueError:
                 continue
             out.append((architecture, stages, figures_only(core)))
@@ -200,9 +202,8 @@ def bus_cost(config, variant, *, channels=1, missing=False, bus):
     programmable settings and the slave together), against :data:`BUS_GOAL_LOGIC_CELLS`."""
     from kfpga.hw.generate import figures_only
 
-    spec = config.spec
-    plain = figures_only(spec.make_core(config, variant, channels=channels, architecture="folded", missing=missing))
-    with_bus = figures_only(spec.make_core(config, variant, channels=channels, architecture="folded",
+    plain = figures_only(make_core(config, variant, channels=channels, architecture="folded", missing=missing))
+    with_bus = figures_only(make_core(config, variant, channels=channels, architecture="folded",
                                            missing=missing, bus=bus))
     a, b = _estimate(plain, "kfpga_core"), _estimate(with_bus, "kfpga_core")
     return {"bus": bus, "logic_cells": b["logic_cells"] - a["logic_cells"],

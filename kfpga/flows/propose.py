@@ -105,8 +105,8 @@ class _Judge:
         self.signals, self.budget, self.settle = signals, budget, settle
         self.limit = budget * (1.0 - RESERVE)
         self.stress = _stress(config)
-        self.error_std = config.spec.error_std(config.params) if config.spec.error_std else None
-        self.main = config.spec.default_output
+        self.error_std = config.spec.model.error_std(config.params) if config.spec.model.error_std else None
+        self.main = config.spec.model.default_output
         self.floats = {v: [_float_runs(config, v, s) for s in signals] for v in self.variants}
         self.noise_free = {}  # the float runs of the limit-cycle check, made once
         self.evaluations = 0
@@ -186,7 +186,7 @@ class _Judge:
 
 def _groups(config):
     """Points that share one format (``same_as``) are trimmed together: ``{leader: [members]}``."""
-    points = config.spec.points
+    points = config.spec.model.points
     groups = {}
     for name in config.formats:
         leader = points[name].same_as or name
@@ -266,7 +266,7 @@ def propose(config, variants, signals, *, budget=0.01, objective="multipliers", 
     if hasattr(progress, "tick"):
         judge.tick = progress.tick
     groups = _groups(config)
-    points = config.spec.points
+    points = config.spec.model.points
     unused = [g for g in groups if points[g].variants and not set(variants) & set(points[g].variants)]
     pinned = [g for g in groups if g not in unused and any(n in config.pinned for n in groups[g])]
     free = [name for g in groups if g not in unused and g not in pinned for name in groups[g]]

@@ -302,7 +302,7 @@ def _manifest(config, variant, top, verilog, assigned, ports, out_field, data_bi
         "timing": timing,
         "prefilter": None if prefilter is None else {
             "filter": prefilter.filter, "model": _jsonable(dataclasses.asdict(prefilter.params)),
-            "latency_cycles": top.prefilter.latency, "delay_samples": prefilter.spec.prefilter.delay,
+            "latency_cycles": top.prefilter.latency, "delay_samples": prefilter.spec.hardware.prefilter.delay,
             "channels": top.prefilter.channels},
         "controller": {"states": 22, "timeout_clk_periods": top.frontend.controller.timeout_periods},
         "ports": [{"name": n, "direction": d, "width": data_bits if n == "out_data" else w,

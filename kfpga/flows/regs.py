@@ -42,7 +42,7 @@ def program_for(config, variant, *, missing=False):
 def new_config(config, variant, params):
     """``config`` with new ``params`` in the core's formats; :class:`ConfigError` when the new model
     does not have the core's shape (a structural constant, a shift or a zero entry, differs)."""
-    spec_variant = config.spec.variants[variant]
+    spec_variant = config.spec.model.variants[variant]
     why = spec_variant.applies(params)
     if why:
         raise ConfigError(why)
@@ -82,7 +82,7 @@ def settings_for(config, variant, params, *, program=None):
     program = program or program_for(config, variant)
     new = new_config(config, variant, params)
     constants, reset = new.constants(variant), new.reset_state(variant)
-    points = dict(new.spec.variants[variant].state_for(new.params))
+    points = dict(new.spec.model.variants[variant].state_for(new.params))
     out = []
     for st in program.settings:
         if st.kind == "c":
@@ -92,7 +92,7 @@ def settings_for(config, variant, params, *, program=None):
                 raise ConfigError(f"{st.label} = {value:.6g} does not fit formats.{st.point} = {st.fmt} "
                                   f"(at most {st.fmt.to_float(st.fmt.max_raw):.6g}): the core cannot take it")
         else:
-            value = float(new.spec.variants[variant].initial(new.params)[st.name])
+            value = float(new.spec.model.variants[variant].initial(new.params)[st.name])
             raw, over = to_raw(value, new.point_format(points[st.name]))
             if over:
                 raise ConfigError(f"the reset value {st.name} = {value:.6g} does not fit formats.{st.point} = {st.fmt}")

@@ -29,6 +29,7 @@ from pathlib import Path
 from amaranth.back import rtlil
 
 from kfpga.core import registry
+from kfpga.hw.cores import make_core
 from kfpga.hw.generate import figures_only
 
 __all__ = ["Job", "jobs", "run_job", "main"]
@@ -57,7 +58,7 @@ def divider_widths():
     from kfpga.core.config import FilterConfig
 
     config = FilterConfig()
-    return figures_only(config.spec.make_core(config, "full"))._divider_args
+    return figures_only(make_core(config, "full"))._divider_args
 
 
 def _cores():
@@ -67,17 +68,17 @@ def _cores():
 
     out = []
     for spec in registry.specs():
-        config = FilterConfig(filter=spec.name) if spec.formal_config is None else spec.formal_config()
-        for variant in spec.variants:
-            if spec.variants[variant].hardware(config.params):
+        config = FilterConfig(filter=spec.name) if spec.hardware.formal_config is None else spec.hardware.formal_config()
+        for variant in spec.model.variants:
+            if spec.model.variants[variant].hardware(config.params):
                 continue
-            core = figures_only(spec.make_core(config, variant))  # each job makes its own
+            core = figures_only(make_core(config, variant))  # each job makes its own
             twin = hasattr(core, "formal_twin")  # a core whose handshake a shorter twin has (hw/folded.py)
             if twin:
                 core = figures_only(core.formal_twin())
 
             def make(s=spec, c=config, v=variant, twin=twin):
-                core = s.make_core(c, v)
+                core = make_core(c, v)
                 return core.formal_twin() if twin else core
             # what a core holds at most: a steady core its input register, one sample in the loop
             # (one channel: the next waits for the write-back), one per output step's register
@@ -111,12 +112,12 @@ def jobs():
             out.append(Job(f"clock divider /{ratio}", prop, lambda only, r=ratio: p.ClockDividerProps(r, only=only),
                            "prove", 3 * ratio + 4, 4 * ratio))
     out += _divider_jobs(p) + _controller_jobs(p)
-    for label, latency, drain, capacity, make_core, limit, startup in _cores():
+    for label, latency, drain, capacity, make, limit, startup in _cores():
         for prop in p.StreamProps.PROPERTIES:
             # the output contract needs a result made and held: one update; the others a drain too
             depth = latency + 8 if prop == "output contract" else drain + latency + 4
             depth = depth if limit is None else min(depth, limit)  # a core may state the solver's reach
-            out.append(Job(label, prop, lambda only, c=make_core, k=capacity, d=drain, s=startup:
+            out.append(Job(label, prop, lambda only, c=make, k=capacity, d=drain, s=startup:
                            p.StreamProps(c(), k, d, only=only, startup=s), "bmc", depth, depth, syn="twin" in label))
     return out
 

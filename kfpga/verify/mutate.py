@@ -39,6 +39,7 @@ from pathlib import Path
 from amaranth.back import rtlil
 
 from kfpga.core import registry
+from kfpga.hw.cores import make_core
 from kfpga.hw.generate import figures_only, plain_module_names
 from kfpga.verify.formal import divider_widths, warm
 
@@ -87,9 +88,9 @@ def blocks():
     # handshake twin), where this instance's cells are not, so no property kills here
     cores = []
     for spec in registry.specs():
-        for b in spec.mutation() if spec.mutation is not None else ():
+        for b in spec.hardware.mutation() if spec.hardware.mutation is not None else ():
             def make(b=b):
-                return b.make() if b.make is not None else b.config.spec.make_core(b.config, b.variant, channels=b.channels)
+                return make_core(b.config, b.variant, channels=b.channels)
             cores.append(Block(b.label, "core", {"variant": b.variant, "channels": b.channels, "config": b.config}, make,
                                "kfpga_core", "", "test_core",
                                {"variant": b.variant, **b.signal, "channels": b.channels, "p_idle": 0.2, "p_ready": 0.7,

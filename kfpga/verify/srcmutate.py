@@ -63,8 +63,9 @@ POOL_MARKS = "not cosim and not slow"
 #: The files copied into the tree the mutants are written to.
 TREE = ("kfpga", "hw", "model", "sim", "constraints", "tests", "pyproject.toml")
 #: The files of ``hw/`` that build no logic: the Verilog and project writer, the synthesis and
-#: timing estimates, and the core factory for Amaranth users.
-NOT_RTL = ("hw/generate.py", "hw/resources.py", "hw/timing.py", "hw/ip.py", "hw/__init__.py")
+#: timing estimates, the core factories for Amaranth users (which choose a core, and build no logic
+#: of their own), and the tool paths.
+NOT_RTL = ("hw/generate.py", "hw/resources.py", "hw/timing.py", "hw/ip.py", "hw/cores.py", "hw/tools.py", "hw/__init__.py")
 
 
 @dataclass
@@ -328,6 +329,8 @@ warnings.simplefilter("ignore")
 from amaranth.back import rtlil
 from kfpga.core import registry
 from kfpga.core.board import Board
+from kfpga.core.spec import Build
+from kfpga.hw.cores import build, make_core
 from kfpga.core.config import FilterConfig
 from kfpga.hw.divider import Divider
 from kfpga.hw.top import FilterSystem
@@ -338,32 +341,32 @@ designs = {"divider": lambda: Divider(dividend_bits=12, divisor_bits=6, quotient
            "top-rate": lambda: FilterSystem(FilterConfig(board=Board(sample_rate_hz=50e6 / 600)))}
 for spec in registry.specs():
     config = FilterConfig(filter=spec.name)
-    for variant in spec.variants:
+    for variant in spec.model.variants:
         for arch in spec.architectures(variant, spec.params()):
             for ch in (1, 3, 10):
                 def make(spec=spec, config=config, variant=variant, arch=arch, ch=ch):
-                    return spec.make_core(config, variant, channels=ch, architecture=arch)
+                    return make_core(config, variant, channels=ch, architecture=arch)
                 designs[f"{spec.name}-{variant}-{arch}-{ch}"] = make
             if arch == "parallel":  # a pipelined loop at every register-stage count it takes
                 for stages in range(1, 9):
                     def staged(spec=spec, config=config, variant=variant, stages=stages):
-                        return spec.make_core(config, variant, architecture="parallel", stages=stages)
+                        return make_core(config, variant, architecture="parallel", stages=stages)
                     designs[f"{spec.name}-{variant}-stages{stages}"] = staged
 # the branches the defaults do not take: each preset, and each filter's own coverage designs
 # (a config on one channel of every variant and architecture, or a core as it is)
 models = {f"{spec.name}-{preset}": FilterConfig(filter=spec.name, params=params())
-          for spec in registry.specs() for preset, (_, params) in (spec.presets or {}).items()}
+          for spec in registry.specs() for preset, (_, params) in (spec.model.presets or {}).items()}
 for spec in registry.specs():
-    for label, what in (spec.coverage() if spec.coverage is not None else {}).items():
-        if isinstance(what, FilterConfig):
-            models[label] = what
+    for label, what in (spec.hardware.coverage() if spec.hardware.coverage is not None else {}).items():
+        if isinstance(what, Build):
+            designs[label] = lambda what=what: build(what)
         else:
-            designs[label] = what
+            models[label] = what
 for label, config in models.items():
-    for variant in config.spec.variants:
+    for variant in config.spec.model.variants:
         for arch in config.spec.architectures(variant, config.params):
             def one(config=config, variant=variant, arch=arch):
-                return config.spec.make_core(config, variant, architecture=arch)
+                return make_core(config, variant, architecture=arch)
             designs[f"{label}-{variant}-{arch}"] = one
 done = {}
 for name, make in designs.items():

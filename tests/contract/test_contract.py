@@ -22,7 +22,6 @@ samples in the simulations: as many as :data:`CYCLE_BUDGET` cycles take, at leas
 
 import contextlib
 import dataclasses
-import importlib
 import os
 
 import numpy as np
@@ -34,7 +33,9 @@ from kfpga.core.config import ConfigError, FilterConfig
 from kfpga.core.fixed import QFormat, Rounding
 from kfpga.core.fixedmodel import FixedModel
 from kfpga.core.formats import MULTIPLIER_BITS
+from kfpga.core.spec import resolve
 from kfpga.core.tools import iverilog_parse, iverilog_path, verilator_lint
+from kfpga.hw.cores import make_core
 from kfpga.hw.generate import write_block
 from kfpga.sim.amaranth_streams import measure_timing, run_core
 from kfpga.sim.runner import SIMULATORS, build, run
@@ -49,11 +50,11 @@ CYCLE_BUDGET, MIN_SAMPLES = 150_000, 30
 PYSIM_CYCLES = int(os.environ.get("KFPGA_PYSIM_CYCLES", "25000"))
 
 CASES = [pytest.param(spec.name, variant, id=f"{spec.name}-{variant}")
-         for spec in registry.specs() for variant in spec.variants]
+         for spec in registry.specs() for variant in spec.model.variants]
 #: Every variant on every architecture that runs it with its default parameters (the folded
 #: core runs every variant).
 HW_CASES = [pytest.param(spec.name, variant, architecture, id=f"{spec.name}-{variant}-{architecture}")
-            for spec in registry.specs() for variant in spec.variants
+            for spec in registry.specs() for variant in spec.model.variants
             for architecture in spec.architectures(variant, spec.params())]
 
 
@@ -84,7 +85,7 @@ def random_config(spec, variant, rng):
             continue
         formats = {}
         for name, fmt in base.formats.items():
-            point = spec.points[name]
+            point = spec.model.points[name]
             if point.same_as is not None:
                 continue
             i = max(1, fmt.int_bits + int(rng.integers(-3, 2)))
@@ -95,7 +96,7 @@ def random_config(spec, variant, rng):
             formats[name] = QFormat(i, f, str(rng.choice(ROUNDINGS)),
                                     str(rng.choice(["saturate", "saturate", "wrap"])))
         for name in base.formats:
-            same = spec.points[name].same_as
+            same = spec.model.points[name].same_as
             if same is not None:
                 formats[name] = formats[same].with_rules(rounding=str(rng.choice(ROUNDINGS)))
         try:
@@ -110,7 +111,7 @@ def samples_for(config, variant, n, channels=1, architecture=None, *, pysim=Fals
     ``pysim``: for a run in Amaranth's simulator."""
     from kfpga.hw.generate import figures_only
 
-    cycles = figures_only(config.spec.make_core(config, variant, channels=channels,
+    cycles = figures_only(make_core(config, variant, channels=channels,
                                                 architecture=architecture)).cycles_per_update
     budget, least = (PYSIM_CYCLES, 2 * channels) if pysim else (CYCLE_BUDGET, MIN_SAMPLES)
     return max(least, min(n, budget // cycles))
@@ -180,10 +181,9 @@ def test_a_core_refuses_a_variant_its_filter_does_not_have(name):
     with pytest.raises(ConfigError) as refused:
         config.require_variant("no-such-variant")
     makers = [lambda: FoldedCore(config, "no-such-variant")]
-    if spec.core is not None:
-        module, function = spec.core.split(":")
-        make_core = getattr(importlib.import_module(module), function)
-        makers.append(lambda: make_core(config, "no-such-variant"))
+    if spec.parallel:
+        own = resolve(registry.core_target(name))
+        makers.append(lambda: own(config, "no-such-variant"))
     for make in makers:
         with pytest.raises(ValueError, match=r"variant must be") as got:
             make()
@@ -196,7 +196,7 @@ def test_a_core_refuses_a_variant_its_filter_does_not_have(name):
 @pytest.mark.parametrize(("name", "variant", "architecture"), long_tier(HW_CASES, slow_update))
 def test_declared_latency_and_cycles_per_update_are_measured(name, variant, architecture):
     config = FilterConfig(filter=name)
-    dut = config.spec.make_core(config, variant, architecture=architecture)
+    dut = make_core(config, variant, architecture=architecture)
     latency, accepted, produced = measure_timing(dut, config)
     assert latency == dut.latency
     # once an input register has filled, inputs are taken and estimates given once per update
@@ -212,9 +212,9 @@ def test_every_loop_pipeline_cuts_between_its_steps():
     checked = {}
     for spec in registry.specs():
         config = FilterConfig(filter=spec.name)
-        for variant in spec.variants:
+        for variant in spec.model.variants:
             if "parallel" in spec.architectures(variant, spec.params()):
-                core = spec.make_core(config, variant, architecture="parallel")
+                core = make_core(config, variant, architecture="parallel")
                 if isinstance(core, LoopPipeline):
                     checked[f"{spec.name}-{variant}"] = stage_table_faults(core)
     assert len(checked) >= 3, checked  # kalman2, kalman and alphabeta have steady loops
@@ -292,11 +292,11 @@ def flag_alone_configs(config, variant, y, most=3):
     n_samples = len(next(iter(y.values())) if isinstance(y, dict) else y)
     for point in FixedModel(config, variant=variant).run(y).overflow_points:
         fmt = config.formats.get(point)
-        if fmt is None or config.spec.points[point].same_as is not None:
+        if fmt is None or config.spec.model.points[point].same_as is not None:
             continue
         for int_bits in range(fmt.int_bits - 1, 0, -1):
             formats = {**config.formats, point: QFormat(int_bits, fmt.frac_bits, fmt.rounding)}
-            for name, p in config.spec.points.items():  # a point sharing its format narrows with it
+            for name, p in config.spec.model.points.items():  # a point sharing its format narrows with it
                 if p.same_as == point and name in formats:
                     formats[name] = formats[point].with_rules(rounding=config.formats[name].rounding)
             try:
@@ -304,7 +304,7 @@ def flag_alone_configs(config, variant, y, most=3):
             except ConfigError:
                 break
             flags = FixedModel(narrow, variant=variant).run(y).overflow_points
-            shared = {point} | {n for n, p in config.spec.points.items() if p.same_as == point}
+            shared = {point} | {n for n, p in config.spec.model.points.items() if p.same_as == point}
             others = np.logical_or.reduce([f for n, f in flags.items() if n not in shared] or [np.zeros(n_samples, bool)])
             alone = np.logical_or.reduce([flags[n] for n in shared if n in flags]) & ~others
             if alone.any():
@@ -338,7 +338,7 @@ def test_each_overflow_flag_reaches_the_estimate_on_its_own(name, variant, archi
 
 #: The designs of the filters whose models have cast points (a product's own result format).
 CAST_CASES = [case for case in HW_CASES
-              if any(registry.get(case.values[0]).points[p].cast for p in FilterConfig(filter=case.values[0]).casts)]
+              if any(registry.get(case.values[0]).model.points[p].cast for p in FilterConfig(filter=case.values[0]).casts)]
 
 
 def cast_config(name, rng):

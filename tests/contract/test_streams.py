@@ -28,6 +28,7 @@ from test_contract import HW_CASES, codes, samples_for
 
 from kfpga.core.config import FilterConfig
 from kfpga.hw.alphabeta import TrackerCore
+from kfpga.hw.cores import make_core
 from kfpga.hw.divider import Divider
 from kfpga.sim.amaranth_streams import AFTER_VALID, check_liveness, run_core, run_stream
 
@@ -52,7 +53,7 @@ def widths(port):
 
 def _core(name, variant, architecture, channels):
     config = FilterConfig(filter=name)
-    return config, config.spec.make_core(config, variant, channels=channels, architecture=architecture)
+    return config, make_core(config, variant, channels=channels, architecture=architecture)
 
 
 def _holds(name, variant, architecture, channels):
