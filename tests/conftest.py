@@ -36,7 +36,7 @@ def pytest_runtest_makereport(item, call):
 #: The fast tier (``make check``): lint, the unit tests and the models' tests, none of which builds a
 #: simulator or runs a synthesis tool. A test of these files marked ``slow``, ``cosim``, ``long`` or
 #: ``models`` stays out of it.
-CHECK_FILES = ("test_lint.py", "test_config.py", "test_fixed.py", "test_ops.py", "test_fuzz.py", "test_golden.py",
+CHECK_FILES = ("test_lint.py", "test_layout.py", "test_config.py", "test_fixed.py", "test_ops.py", "test_fuzz.py", "test_golden.py",
                "test_analysis.py", "test_precision.py", "test_plugins.py", "test_cli_errors.py", "test_docs.py",
                "test_regs.py", "test_missing.py", "test_model_*.py")
 _NOT_CHECK = {"slow", "cosim", "long", "models"}
