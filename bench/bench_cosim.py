@@ -22,7 +22,7 @@ import platform
 import time
 
 from kfpga.core.config import FilterConfig
-from kfpga.core.tools import simulator_available
+from kfpga.hw.tools import simulator_available
 from kfpga.sim import corerun, system
 from kfpga.sim.runner import SIMULATORS, build, run
 from kfpga.sim.sources import stress_codes

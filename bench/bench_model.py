@@ -21,7 +21,7 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 from fxpmath import Fxp
 
-from kfpga.core.ads8364 import CODE_FORMAT as INPUT_FORMAT
+from kfpga.core.codes import CODE_FORMAT as INPUT_FORMAT
 from kfpga.core.config import FilterConfig
 from kfpga.core.fixedmodel import FixedModel
 from kfpga.model.kalman2 import steady_gain

@@ -38,7 +38,7 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
-from kfpga.core.ads8364 import hold_pair
+from kfpga.hw.ads8364_timing import hold_pair
 
 __all__ = ["ControlWord", "SampleLayout", "ADS8364Controller", "control_table",
            "N_STATES", "CONV0", "CONV19", "READ0", "READ1"]

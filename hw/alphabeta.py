@@ -18,7 +18,7 @@ from amaranth import Cat, Module, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from kfpga.core.ads8364 import CODE_FORMAT
+from kfpga.core.codes import CODE_FORMAT
 from kfpga.hw.cvloop import CUTS, ConstantGainLoop, steady_correct, steady_predict, steady_products
 from kfpga.hw.storage import check_channels, m4k_blocks
 from kfpga.model import cvloop as eq

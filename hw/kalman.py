@@ -14,8 +14,8 @@ from typing import ClassVar
 
 from amaranth import Cat, Const, Module, Mux, Signal, signed
 
-from kfpga.core.ads8364 import CODE_FORMAT
 from kfpga.core.board import MAX_CHANNELS
+from kfpga.core.codes import CODE_FORMAT
 from kfpga.core.ops import Fx, divider_shift, quotient_bits
 from kfpga.hw.arith import live_flags
 from kfpga.hw.core import Core, LoopPipeline, write_estimate

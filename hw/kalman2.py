@@ -16,8 +16,8 @@ from __future__ import annotations
 
 from amaranth import Cat, Module, Mux, Signal, signed
 
-from kfpga.core.ads8364 import CODE_FORMAT
 from kfpga.core.board import MAX_CHANNELS
+from kfpga.core.codes import CODE_FORMAT
 from kfpga.core.ops import Fx, divider_shift, quotient_bits
 from kfpga.hw.arith import NO_OVERFLOW, any_flag, live_flags
 from kfpga.hw.core import Core, write_estimate

@@ -33,8 +33,8 @@ import tempfile
 from collections import defaultdict
 from pathlib import Path
 
-from kfpga.core.tools import nextpnr_ecp5_command, yosys_command
 from kfpga.hw.timing import analyse
+from kfpga.hw.tools import nextpnr_ecp5_command, yosys_command
 
 __all__ = ["EP2C20", "estimate", "longest_path"]
 

@@ -1002,7 +1002,7 @@ def _sine_truth(params, count):
 def _model_truth(params, count, rng):
     """States drawn from the model itself, ``x(k+1) = F x(k) + G w``, ``w ~ N(0, Q)`` from 0, scaled
     (all of them by one factor) when the observations would pass 3/4 of the ADC's range."""
-    from kfpga.core.ads8364 import CODE_MAX
+    from kfpga.core.codes import CODE_MAX
 
     f, g = np.array(params.F), np.array(params.G)
     lam, vec = np.linalg.eigh(np.array(params.Q))

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kfpga.core.ads8364 import CODE_FORMAT, CODE_MAX
+from kfpga.core.codes import CODE_FORMAT, CODE_MAX
 from kfpga.core.fixed import QFormat, Rounding, bits_for
 from kfpga.core.formats import MAX_WORD
 from kfpga.core.params import number

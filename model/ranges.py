@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.core.codes import CODE_MAX, CODE_MIN
 from kfpga.core.compiled import compile_float_ranges
 
 __all__ = ["RANGE_SEED", "SEGMENT", "full_scale_stimulus", "float_ranges"]

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.core.codes import CODE_MAX, CODE_MIN
 from kfpga.core.errors import UsageError
 
 __all__ = ["SCENARIOS", "sine", "random_accel", "model_walk", "adc_codes", "make", "for_config", "stress_codes",

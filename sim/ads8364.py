@@ -1,7 +1,7 @@
 """Behavioural model of the TI ADS8364 with timing checks.
 
 # Ref: Texas Instruments SBAS219C (ADS8364), Timing and control; Explanation of clock, reset
-#      and EOC; Getting data (Figures 7, 9). Timing figures: kfpga/core/ads8364.py (TIMING).
+#      and EOC; Getting data (Figures 7, 9). Timing figures: hw/ads8364_timing.py (TIMING).
 
 The model is simulator-agnostic: a wrapper (``sim/bench.py`` for cocotb, ``tests/helpers/adc_harness.py``
 for the Amaranth unit tests) reports the pin levels with :meth:`ADS8364.pins` whenever they may
@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from kfpga.core.ads8364 import TIMING, figure
+from kfpga.hw.ads8364_timing import TIMING, figure
 
 __all__ = ["TimingViolation", "ADS8364", "Read"]
 

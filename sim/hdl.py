@@ -13,7 +13,7 @@ the generated ``kfpga_top``:
 * the self-checking testbench of ``kfpga testbench`` (:mod:`kfpga.sim.testbench`).
 * :func:`check_harness`, which drives the model from a pin script for its own tests.
 
-Both set the model's timing parameters from :data:`kfpga.core.ads8364.TIMING`.
+Both set the model's timing parameters from :data:`kfpga.hw.ads8364_timing.TIMING`.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from kfpga.core.ads8364 import TIMING, figure
 from kfpga.core.board import SYSTEM_PERIOD_NS
+from kfpga.hw.ads8364_timing import TIMING, figure
 
 __all__ = ["MODEL_FILE", "MODEL_NAME", "COSIM_NAME", "ERRORS", "STATUS", "model_parameters", "model_instance",
            "dut_instance", "write_model", "cosim_wrapper", "clock_top", "write_codes", "read_log", "error_text",

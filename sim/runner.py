@@ -20,8 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from kfpga.core.config import FilterConfig
-from kfpga.core.tools import simulator_available, verilator_env, verilator_fst
 from kfpga.hw.generate import TOP_NAME, write_block, write_top
+from kfpga.hw.tools import simulator_available, verilator_env, verilator_fst
 
 __all__ = ["SIMULATORS", "Built", "build", "run", "SimulationFailed", "file_lock"]
 

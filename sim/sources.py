@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.core.codes import CODE_MAX, CODE_MIN
 from kfpga.core.csvio import read_header, read_samples
 from kfpga.core.errors import InputError
 from kfpga.model import scenarios

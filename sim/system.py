@@ -32,7 +32,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.core.codes import CODE_MAX, CODE_MIN
 from kfpga.core.config import FilterConfig
 from kfpga.flows.analysis import float_run, rmse, sqnr_db
 from kfpga.hw.cores import make_core
@@ -359,7 +359,7 @@ def compile_cached(simulator, tag, write, top, *, root=DEFAULT_ROOT):
     Verilator builds ``top`` with the C++ clock loop of ``cosim_main.cpp``; Icarus builds
     ``<top>_clock``, which the files must hold, around it.
     """
-    from kfpga.core.tools import iverilog_path, simulator_available, verilator_env, verilator_root
+    from kfpga.hw.tools import iverilog_path, simulator_available, verilator_env, verilator_root
     from kfpga.sim.runner import file_lock
 
     ok, why = simulator_available(simulator)

@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from kfpga.core.ads8364 import CHANNELS
 from kfpga.core.board import SYSTEM_PERIOD_NS
+from kfpga.hw.ads8364_timing import CHANNELS
 from kfpga.sim import hdl
 from kfpga.sim.ads8364 import Read
 from kfpga.sim.scoreboard import Scoreboard
@@ -252,7 +252,7 @@ def run_icarus(out_dir, timeout_s=None):
     """Compile and run the testbench in ``out_dir`` with Icarus; returns ``(exit status, output)``."""
     import subprocess
 
-    from kfpga.core.tools import iverilog_path
+    from kfpga.hw.tools import iverilog_path
 
     exe = iverilog_path()
     if exe is None:

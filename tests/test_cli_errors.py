@@ -251,7 +251,7 @@ def test_argparse_errors_end_with_the_one_line_error():
 @pytest.mark.slow  # Yosys compiles its WebAssembly again under the fresh HOME (about 35 s)
 def test_the_tool_runs_from_an_unactivated_venv(tmp_path):
     """No venv on PATH (a user runs .venv/bin/kfpga): Yosys still comes from the interpreter's package."""
-    from kfpga.core.tools import yosys_command
+    from kfpga.hw.tools import yosys_command
 
     env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
     result = subprocess.run(yosys_command("-q", "-p", "help"), capture_output=True, text=True, env=env, cwd=tmp_path,

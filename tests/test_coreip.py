@@ -14,8 +14,8 @@ import pytest
 
 from kfpga.cli import main
 from kfpga.core.config import FilterConfig
-from kfpga.core.tools import iverilog_path, verilator_env, verilator_root
 from kfpga.flows.coreip import write_core
+from kfpga.hw.tools import iverilog_path, verilator_env, verilator_root
 from tests.helpers.simulators import need
 
 ROOT = Path(__file__).parents[1]

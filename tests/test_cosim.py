@@ -282,7 +282,7 @@ def test_simulate_waves(simulator, capsys, monkeypatch, tmp_path):
     assert len(result["waves"]) == 1
     wave = tmp_path / result["waves"][0]
     assert wave.parent == tmp_path / "build" / "waves"
-    from kfpga.core.tools import verilator_fst
+    from kfpga.hw.tools import verilator_fst
 
     if simulator == "icarus" or verilator_fst():
         assert wave.suffix == ".fst" and wave.stat().st_size > 1000  # FST is compressed binary

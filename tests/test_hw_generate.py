@@ -6,8 +6,8 @@ import pytest
 
 from kfpga.cli import main
 from kfpga.core.config import FilterConfig
-from kfpga.core.tools import iverilog_parse, iverilog_path, verilator_lint
 from kfpga.hw.generate import FORBIDDEN, LINT_WAIVERS, TOP_NAME, write_block, write_top
+from kfpga.hw.tools import iverilog_parse, iverilog_path, verilator_lint
 from kfpga.hw.top import PORTS
 
 DESIGNS = [("steady", False), ("full", False), ("steady", True), ("full", True)]

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from kfpga.core import registry
-from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.core.codes import CODE_MAX, CODE_MIN
 from kfpga.core.config import ConfigError, FilterConfig
 from kfpga.hw.cores import make_core
 from kfpga.hw.generate import figures_only

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from kfpga.cli import main
-from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.core.codes import CODE_MAX, CODE_MIN
 from kfpga.core.config import FilterConfig
 from kfpga.core.fixedmodel import FixedModel
 from kfpga.core.ops import CostOps, IntOps

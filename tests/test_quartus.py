@@ -9,10 +9,10 @@ import pytest
 from kfpga.cli import main
 from kfpga.core import registry
 from kfpga.core.config import FilterConfig
-from kfpga.core.tools import iverilog_parse, iverilog_path
 from kfpga.flows.quartus import PinError, load_pins, port_bits, write_project
 from kfpga.hw.cores import make_core
 from kfpga.hw.resources import estimate
+from kfpga.hw.tools import iverilog_parse, iverilog_path
 from kfpga.hw.top import PORTS
 from kfpga.model.reference import KalmanParams
 

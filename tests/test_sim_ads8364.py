@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from kfpga.core.board import SYSTEM_PERIOD_NS
-from kfpga.core.tools import iverilog_path, verilator_env, verilator_root
+from kfpga.hw.tools import iverilog_path, verilator_env, verilator_root
 from kfpga.sim import hdl
 from kfpga.sim.ads8364 import ADS8364, TimingViolation
 from tests.helpers.simulators import need

@@ -64,7 +64,7 @@ def budget(text):
 
 
 def adc_channel(text):
-    from kfpga.core.ads8364 import CHANNELS
+    from kfpga.hw.ads8364_timing import CHANNELS
 
     if text.upper() in CHANNELS:
         return CHANNELS.index(text.upper())

@@ -83,7 +83,7 @@ def _print(config, args, label, m):
 
 def _with_prefilter(args, config, pre, truth, y, label):
     """``compare --prefilter NAME``: the filter with and without the pre-filter on a glitchy signal."""
-    from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+    from kfpga.core.codes import CODE_MAX, CODE_MIN
     from kfpga.core.fixedmodel import FixedModel
     from kfpga.flows.analysis import compare, sample_count
 

@@ -86,7 +86,7 @@ def run(args):
 
 
 def _plot(found, need, path, title):
-    from kfpga.core.plots import pyplot, save_figure
+    from kfpga.model.plots import pyplot, save_figure
 
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 5))

@@ -200,7 +200,7 @@ def _timing(args, config, architecture):
 
 
 def _print(args, config, field, manifest, pre):
-    from kfpga.core.ads8364 import CHANNELS
+    from kfpga.hw.ads8364_timing import CHANNELS
     from kfpga.hw.generate import TOP_NAME
 
     print(f"wrote {args.out}/: {', '.join(manifest['files'])}")
@@ -222,8 +222,8 @@ def _print(args, config, field, manifest, pre):
 
 
 def _lint(out, top=None):
-    from kfpga.core.tools import iverilog_parse, iverilog_path, verilator_lint
     from kfpga.hw.generate import TOP_NAME
+    from kfpga.hw.tools import iverilog_parse, iverilog_path, verilator_lint
 
     top = top or TOP_NAME
     path = Path(out) / f"{top}.v"

@@ -37,7 +37,7 @@ def add_parser(sub):
 
 
 def _check(args, config, pre):
-    from kfpga.core.tools import simulator_available
+    from kfpga.hw.tools import simulator_available
 
     ok, why = simulator_available(args.simulator)
     if not ok:
@@ -104,7 +104,7 @@ def _copy_waves(args, result):
     import shutil
 
     if args.waves and args.simulator == "verilator":
-        from kfpga.core.tools import verilator_fst
+        from kfpga.hw.tools import verilator_fst
 
         if not verilator_fst():
             common.info("Verilator writes VCD here: its FST writer needs the lz4 headers (Debian: apt-get install "
@@ -168,7 +168,7 @@ def _sim_time(us):
 
 
 def _print(args, config, pre, summary):
-    from kfpga.core.ads8364 import CHANNELS
+    from kfpga.hw.ads8364_timing import CHANNELS
 
     where = "all six channels" if args.channels == 6 else (
         f"{summary['sensors']} sensors on a multiplexer in front of channel {CHANNELS[args.adc[0]]}"

@@ -46,8 +46,8 @@ def _run_core_only(args):
     import subprocess
 
     from kfpga.core.paths import atomic_dir, check_output_dir
-    from kfpga.core.tools import iverilog_path, simulator_available
     from kfpga.flows.coreip import write_core
+    from kfpga.hw.tools import iverilog_path, simulator_available
 
     for option, value in (("--channel", args.channel), ("--input", args.input), ("--glitches", getattr(args, "glitches", None)),
                           ("--prefilter", getattr(args, "prefilter", None))):
@@ -110,7 +110,7 @@ def _report(args, result, head, lines):
 
 def _run_board(args):
     from kfpga.core.paths import atomic_dir, check_output_dir
-    from kfpga.core.tools import simulator_available
+    from kfpga.hw.tools import simulator_available
     from kfpga.sim.testbench import run_icarus, write_testbench
 
     check_output_dir(args.out, option="--out", marker="testbench.json")

@@ -22,8 +22,8 @@ from types import MappingProxyType
 
 import numpy as np
 
-from kfpga.core.ads8364 import CODE_FORMAT
 from kfpga.core.board import Board
+from kfpga.core.codes import CODE_FORMAT
 from kfpga.core.errors import ConfigError
 from kfpga.core.fixed import QFormat, bits_for, to_raw
 from kfpga.core.formats import (

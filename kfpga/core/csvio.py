@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.core.codes import CODE_MAX, CODE_MIN
 from kfpga.core.errors import InputError
 from kfpga.core.paths import read_text
 

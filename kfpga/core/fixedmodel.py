@@ -16,7 +16,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from kfpga.core.ads8364 import CODE_FORMAT
+from kfpga.core.codes import CODE_FORMAT
 from kfpga.core.compiled import compile_stage
 from kfpga.core.config import FilterConfig
 from kfpga.core.ops import FractionOps, IntOps

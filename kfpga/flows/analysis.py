@@ -11,7 +11,7 @@ import numpy as np
 from kfpga.core.config import FilterConfig, analysed_ranges, default_formats
 from kfpga.core.fixedmodel import FixedModel
 from kfpga.core.formats import MAX_WORD
-from kfpga.core.plots import pyplot, save_figure
+from kfpga.model.plots import pyplot, save_figure
 
 __all__ = ["sample_count", "rmse", "sqnr_db", "float_run", "Comparison", "compare", "limit_cycles", "sweep",
            "precision_warnings", "startup_samples",

@@ -13,11 +13,11 @@ from pathlib import Path
 from string import Template
 
 from kfpga import __version__
-from kfpga.core.ads8364 import CHANNELS, figure
 from kfpga.core.board import SYSTEM_MHZ, SYSTEM_PERIOD_NS
 from kfpga.core.errors import InputError, PinError
 from kfpga.core.paths import read_text
 from kfpga.core.spec import Constant
+from kfpga.hw.ads8364_timing import CHANNELS, figure
 from kfpga.hw.generate import TOP_NAME, write_top
 from kfpga.hw.top import PORTS, out_width, port_widths
 from kfpga.hw.top import out_field as top_out_field

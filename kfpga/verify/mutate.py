@@ -445,7 +445,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if args.mutants < 1:
         parser.exit(2, f"{parser.prog}: error: --mutants must be >= 1, not {args.mutants}\n")
-    from kfpga.core.tools import simulator_available
+    from kfpga.hw.tools import simulator_available
 
     ok, why = simulator_available("icarus")
     if not ok:

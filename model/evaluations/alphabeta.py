@@ -287,7 +287,7 @@ def alphabeta_claims(options, result, runs):
 
 def alphabeta_plot(result, path):
     """The paper's figures: the tracks (truth, plots, filtered), and the position error against time."""
-    from kfpga.core.plots import pyplot, save_figure
+    from kfpga.model.plots import pyplot, save_figure
 
     plt = pyplot()
 

@@ -260,7 +260,7 @@ def _window_by_noise(options, seed):
 
 def lsfront_plot(result, path):
     """The patent's fig. 4: the velocity estimates through the deceleration, and their errors."""
-    from kfpga.core.plots import pyplot, save_figure
+    from kfpga.model.plots import pyplot, save_figure
 
     plt = pyplot()
 

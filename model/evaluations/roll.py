@@ -281,7 +281,7 @@ def _word_finding(result):
 def roll_plot(result, path):
     """The paper's figs. 4-5: the roll and its predictions, and the prediction errors; its table 1
     with both forms' predictions; and the word-length sweep."""
-    from kfpga.core.plots import pyplot, save_figure
+    from kfpga.model.plots import pyplot, save_figure
 
     plt = pyplot()
 

@@ -359,7 +359,7 @@ def tukey53h_claims(options, result, runs):
 
 def tukey53h_plot(result, path):
     """The paper's figs. 5-6: east and north velocity before and after each method."""
-    from kfpga.core.plots import pyplot, save_figure
+    from kfpga.model.plots import pyplot, save_figure
 
     plt = pyplot()
 

@@ -28,15 +28,15 @@ import numpy as np
 import pytest
 
 from kfpga.core import registry
-from kfpga.core.ads8364 import CODE_MAX, CODE_MIN
+from kfpga.core.codes import CODE_MAX, CODE_MIN
 from kfpga.core.config import ConfigError, FilterConfig
 from kfpga.core.fixed import QFormat, Rounding
 from kfpga.core.fixedmodel import FixedModel
 from kfpga.core.formats import MULTIPLIER_BITS
 from kfpga.core.spec import resolve
-from kfpga.core.tools import iverilog_parse, iverilog_path, verilator_lint
 from kfpga.hw.cores import make_core
 from kfpga.hw.generate import write_block
+from kfpga.hw.tools import iverilog_parse, iverilog_path, verilator_lint
 from kfpga.sim.amaranth_streams import measure_timing, run_core
 from kfpga.sim.runner import SIMULATORS, build, run
 from tests.helpers.pipeline import stage_table_faults

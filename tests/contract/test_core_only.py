@@ -18,7 +18,7 @@ from tests.helpers.simulators import need
 
 
 def run_core_tb(folder, timeout_s=900):
-    from kfpga.core.tools import iverilog_path
+    from kfpga.hw.tools import iverilog_path
 
     path = f"{Path(iverilog_path()).parent}:/usr/bin:/bin"
     done = subprocess.run(["sh", "run_icarus.sh"], cwd=folder / "tb", capture_output=True, text=True,

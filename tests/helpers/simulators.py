@@ -5,7 +5,7 @@ import os
 
 import pytest
 
-from kfpga.core.tools import simulator_available
+from kfpga.hw.tools import simulator_available
 
 
 def need(simulator):

@@ -1,4 +1,4 @@
-"""ADS8364 facts used by the controller, its behavioural model and the timing constraints.
+"""ADS8364 timing facts used by the controller, its behavioural model and the timing constraints.
 
 # Ref: Texas Instruments SBAS219C, "ADS8364: 250kSPS, 16-bit, 6-channel simultaneous sampling
 #      ADC", sections "Timing and control", "Explanation of clock, reset, FD and EOC pins",
@@ -16,10 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from kfpga.core.fixed import QFormat
-
-__all__ = ["Timing", "TIMING", "CHANNELS", "ADDRESS_CYCLE_MODE", "ADDRESS_FIFO_MODE", "CODE_FORMAT", "CODE_MIN",
-           "CODE_MAX", "hold_pair", "figure"]
+__all__ = ["Timing", "TIMING", "CHANNELS", "ADDRESS_CYCLE_MODE", "ADDRESS_FIFO_MODE", "hold_pair", "figure"]
 
 #: Channel names in address order: A2..A0 = 000..101 select them directly (SBAS219C, Getting data).
 CHANNELS = ("A0", "A1", "B0", "B1", "C0", "C1")
@@ -74,15 +71,6 @@ TIMING = {
                "not seen for the ADS8364 (0 ns on sibling parts); the controller gives a CLK period", "assumed"),
     )
 }
-
-#: Output coding: 16-bit binary two's complement ([Zhong] 4.2.1: "the MSB is the sign bit";
-#: the sibling ADS8361's table, SBAS230E, lists 7FFFh..8000h for +FS..-FS).
-OUTPUT_CODING = "twos_complement"
-#: One conversion result as a fixed-point value: a signed 16-bit integer code.
-CODE_FORMAT = QFormat(16, 0)
-#: The code range, -32768..32767.
-CODE_MIN, CODE_MAX = CODE_FORMAT.min_raw, CODE_FORMAT.max_raw
-
 
 def figure(symbol, clk_period_ns=200.0):
     """A timing figure in nanoseconds (``clk`` figures scaled by ``clk_period_ns``)."""
