@@ -1,4 +1,6 @@
-"""The ``kfpga`` command line: one module per command, the options they share in ``common``.
+"""The ``kfpga`` command line: one module per command; what they share is in ``options`` (argument
+types, option groups), ``loading`` (the config and the signal), ``design`` (the hardware's choices)
+and ``output`` (progress, notes, JSON).
 
 Every filter-specific option comes from the registry: a filter's evaluation (``kfpga evaluate
 NAME``), its extra modes of ``kfpga filter`` and its pre-filter options are declared by its spec.
@@ -14,7 +16,6 @@ import threading
 
 from kfpga import __version__
 from kfpga.cli import (
-    common,
     compare,
     evaluate,
     explore,
@@ -22,6 +23,7 @@ from kfpga.cli import (
     filters,
     formats,
     generate,
+    options,
     pins,
     propose,
     regs,
@@ -57,7 +59,7 @@ def build_parser():
         if examples:
             p = sub.choices[command.__name__.rsplit(".", 1)[1]]
             p.epilog = "examples:\n" + "\n".join(f"  {line}" for line in examples)
-            p.formatter_class = common.ExamplesFormatter
+            p.formatter_class = options.ExamplesFormatter
     return parser
 
 
@@ -128,7 +130,7 @@ def main(argv=None):
         return args.func(args)
     except USER_ERRORS as exc:
         print(f"kfpga {args.command}: error: {exc}", file=sys.stderr)
-        return common.EXIT_USAGE
+        return options.EXIT_USAGE
     except KeyboardInterrupt:
         print(f"kfpga {args.command}: interrupted", file=sys.stderr)
         return 130

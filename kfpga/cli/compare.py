@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kfpga.cli import common
+from kfpga.cli import loading, options, output
 from kfpga.core.errors import UsageError
 
 #: Full-scale ADC glitches ``compare --prefilter`` puts into a scenario's codes: this share of the samples.
@@ -17,28 +17,28 @@ def add_parser(sub):
                                    "report RMSE against truth of the raw input, the float and the fixed estimate, "
                                    "the largest fixed - float difference in LSBs of each output, the SQNR of fixed "
                                    "vs float and the number of samples that overflowed.")
-    common.add_signal_args(p)
-    common.add_json(p)
+    options.add_signal_args(p)
+    options.add_json(p)
     p.add_argument("--plot", metavar="PNG", help="draw truth, input, both estimates and the fixed - float error")
-    common.add_prefilter_args(p)
+    options.add_prefilter_args(p)
     p.set_defaults(func=run)
 
 
 def run(args):
     from kfpga.flows.analysis import compare, plot_compare, sample_count
 
-    common.check_signal_args(args)
-    args.plot = common.check_plot(args.plot)
-    config = common.load_config(args)
-    pre = common.prefilter(args)
+    loading.check_signal_args(args)
+    args.plot = options.check_plot(args.plot)
+    config = loading.load_config(args)
+    pre = options.prefilter(args)
     if pre is not None:
         if len(config.inputs) != 1:
             raise UsageError(f"--prefilter: compare takes a one-input filter here; {config.filter} has "
                              f"{len(config.inputs)} inputs")
         if args.plot:
             raise UsageError("--plot does not apply with --prefilter (the table has the two runs)")
-    truth, y, label = common.samples_for(args, config, command="compare")
-    common.warn_precision(config)
+    truth, y, label = loading.samples_for(args, config, command="compare")
+    loading.warn_precision(config)
     if pre is not None:
         return _with_prefilter(args, config, pre, truth, y, label)
     result = compare(config, args.variant, y, truth, settle=args.settle, seed=args.seed if not args.input else None,
@@ -48,7 +48,7 @@ def run(args):
         plot_compare(result, args.plot, title=f"kfpga compare: {args.variant} variant, {label}, {sample_count(y)} samples")
         m["plot"] = args.plot
     if args.json:
-        common.emit_json(m)
+        output.emit_json(m)
         return 0
     _print(config, args, label, m)
     return 0
@@ -107,13 +107,13 @@ def _with_prefilter(args, config, pre, truth, y, label):
          "prefilter_params": {k: getattr(pre.params, k) for k in pre.params.__dataclass_fields__},
          "replaced": replaced, "without_prefilter": runs["without"], "with_prefilter": runs["with"]}
     if args.json:
-        common.emit_json(m)
+        output.emit_json(m)
         return 0
     field = runs["with"]["field"]
     print(f"kfpga compare: {config.filter} filter, {args.variant} variant, {label}, {m['samples']} samples"
           + (f", seed {m['seed']}" if m["seed"] is not None else "")
           + (f", {glitches} full-scale glitches ({100 * GLITCH_DENSITY:g} % of the samples)" if not args.input else ""))
-    print(f"  {pre.filter} pre-filter: {common.describe_params(pre.params)}, {replaced} sample(s) replaced, each sample "
+    print(f"  {pre.filter} pre-filter: {loading.describe_params(pre.params)}, {replaced} sample(s) replaced, each sample "
           f"{delay} late")
     if runs["with"]["rmse_float"] is None:
         print("  no truth for this signal: no RMSE (a CSV replay); the replaced count is above")

@@ -4,7 +4,7 @@ them."""
 
 from __future__ import annotations
 
-from kfpga.cli import common
+from kfpga.cli import options, output
 from kfpga.core import registry
 from kfpga.core.claims import claims_markdown, claims_table
 from kfpga.core.errors import UsageError
@@ -34,26 +34,26 @@ def add_parser(sub):
                                    "the document with its value, ours over the seeds, and a verdict (reproduced: it "
                                    "holds on every seed; not reproduced; not testable, with the reason).",
                        epilog=_examples(),
-                       formatter_class=common.ExamplesFormatter)
+                       formatter_class=options.ExamplesFormatter)
     ev = p.add_subparsers(dest="evaluation", metavar="NAME", required=True)
     for spec in registry.specs():
         evaluation = spec.load_evaluation()
         if evaluation is None:
             continue
         q = ev.add_parser(spec.name, aliases=list(spec.docs.aliases), help=evaluation.summary,
-                          description=evaluation.description, formatter_class=common.ExamplesFormatter,
+                          description=evaluation.description, formatter_class=options.ExamplesFormatter,
                           epilog=f"examples:\n  kfpga evaluate {spec.name}                 # seeds 1..20 and the claims\n"
                                  f"  kfpga evaluate {spec.name} --seed 3 --plot build/{spec.name}.png")
         evaluation.add_arguments(q)
-        q.add_argument("--seeds", type=common.int_at_least(1, "an integer >= 1"), metavar="N",
+        q.add_argument("--seeds", type=options.int_at_least(1, "an integer >= 1"), metavar="N",
                        help=f"run N seeds, from --seed on (default: {DEFAULT_SEEDS} seeds, 1 .. {DEFAULT_SEEDS}; "
                             "with --seed alone, that seed only)")
-        q.add_argument("--seed", type=common.seed_type, metavar="S",
+        q.add_argument("--seed", type=options.seed_type, metavar="S",
                        help="the first seed (alone: replay that one seed)")
-        common.add_json(q, "print the tables and the claims as JSON")
+        options.add_json(q, "print the tables and the claims as JSON")
         q.add_argument("--markdown", action="store_true", help="print the claims alone, as a Markdown table")
         q.add_argument("--plot", metavar="PNG", help="draw the evaluation's figures (of the first seed)")
-        common.add_quiet(q)
+        options.add_quiet(q)
         q.set_defaults(func=run, spec_name=spec.name)
 
 
@@ -79,7 +79,7 @@ def _measures(evaluation, args, seeds, first):
     """``measure`` (or ``run``) on every seed, the first's full run reused; a bar on a terminal."""
     measure = evaluation.measure or evaluation.run
     out = []
-    with common.progress_bar(args.quiet or len(seeds) == 1, total=len(seeds), desc="evaluate", unit="seed") as bar:
+    with output.progress_bar(args.quiet or len(seeds) == 1, total=len(seeds), desc="evaluate", unit="seed") as bar:
         for seed in seeds:
             out.append(first if evaluation.measure is None and seed == seeds[0] else measure(args, seed))
             bar.update(1)
@@ -88,15 +88,15 @@ def _measures(evaluation, args, seeds, first):
 
 def run(args):
     evaluation = registry.get(args.spec_name).load_evaluation()
-    plot = common.check_plot(args.plot)
+    plot = options.check_plot(args.plot)
     if plot and evaluation.plot is None:
-        common.not_with("--plot", f"evaluate {args.spec_name}", "this evaluation has no figures")
+        options.not_with("--plot", f"evaluate {args.spec_name}", "this evaluation has no figures")
     if args.markdown and args.json:
-        common.not_with("--markdown", "--json", "each prints the claims its own way")
+        options.not_with("--markdown", "--json", "each prints the claims its own way")
     evaluation.check(args)
     if evaluation.seeded(args):
         seeds = seeds_of(args)
-        common.info(f"seeds {seeds[0]} .. {seeds[-1]}" if len(seeds) > 1 else f"seed {seeds[0]}")
+        output.info(f"seeds {seeds[0]} .. {seeds[-1]}" if len(seeds) > 1 else f"seed {seeds[0]}")
         result = evaluation.run(args, seeds[0])
         claims = evaluation.claims(args, result, _measures(evaluation, args, seeds, result))
     else:
@@ -109,11 +109,11 @@ def run(args):
         claims = evaluation.claims(args, result, [result])
     if plot:
         evaluation.plot(result, plot)
-        common.info(f"plot: {plot}")
+        output.info(f"plot: {plot}")
     if args.markdown:
         print(claims_markdown(claims, _runs_label(seeds)))
     elif args.json:
-        common.emit_json(evaluation.summary_json(result) | {"seeds": seeds, "claims": [c.to_json() for c in claims]})
+        output.emit_json(evaluation.summary_json(result) | {"seeds": seeds, "claims": [c.to_json() for c in claims]})
     else:
         print(evaluation.table(result))
         print()

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from kfpga.cli import common
+from kfpga.cli import design, loading, options, output
 from kfpga.core import registry
 
 
@@ -20,14 +20,14 @@ def add_parser(sub):
                        epilog="example: kfpga explore --config my.toml --plot build/explore.png; "
                               "kfpga explore --config my.toml --bus avalon (the folded core with its register bus, "
                               "and what the bus costs)")
-    common.add_filter_args(p)
+    options.add_filter_args(p)
     p.add_argument("--channels", type=int, default=1, metavar="N",
                    help="channel states in the core (default: 1; the board has 1 or 6)")
     p.add_argument("--config", metavar="TOML", help="model parameters, formats and [board] rate")
-    common.add_bus_args(p)
-    common.add_json(p, "print the candidates as a JSON list (with --bus: and the bus's cost)")
+    options.add_bus_args(p)
+    options.add_json(p, "print the candidates as a JSON list (with --bus: and the bus's cost)")
     p.add_argument("--plot", metavar="PNG", help="draw logic cells against throughput, the need and the chosen one marked")
-    common.add_quiet(p)
+    options.add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -37,21 +37,21 @@ def run(args):
 
     if not 1 <= args.channels <= 512:
         raise UsageError(f"--channels must be 1..512, not {args.channels}")
-    plot = common.check_plot(args.plot)
-    config = common.load_config(args, hardware=True)
-    common.check_bus_args(args, config)
-    found = common.explore(config, args.variant, args.channels, quiet=args.quiet, missing=args.missing, bus=args.bus)
+    plot = options.check_plot(args.plot)
+    config = loading.load_config(args, hardware=True)
+    design.check_bus_args(args, config)
+    found = design.explore(config, args.variant, args.channels, quiet=args.quiet, missing=args.missing, bus=args.bus)
     cost = None
     if args.bus:
         from kfpga.flows.explore import bus_cost
 
         cost = bus_cost(config, args.variant, channels=args.channels, missing=args.missing, bus=args.bus)
     best = choose(found)
-    need = common.need_hz(config, args.channels)
+    need = design.need_hz(config, args.channels)
     if plot:
         _plot(found, need, plot, f"kfpga explore: {config.filter} {args.variant}, {args.channels} channel(s)")
     if args.json:
-        common.emit_json({"candidates": [c.as_dict() for c in found], "bus": cost} if cost else
+        output.emit_json({"candidates": [c.as_dict() for c in found], "bus": cost} if cost else
                          [c.as_dict() for c in found])
         return 0
     clock = config.board.clock_hz / 1e6

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kfpga.cli import common
+from kfpga.cli import loading, options, output
 from kfpga.core import registry
 from kfpga.core.errors import InputError, UsageError
 
@@ -21,7 +21,7 @@ def add_parser(sub):
                                    "and the output marks it in a 'missing' column.")
     p.add_argument("--input", required=True, metavar="CSV", help="input file with the filter's input columns")
     p.add_argument("--output", required=True, metavar="CSV", help="output file")
-    common.add_filter_args(p)
+    options.add_filter_args(p)
     p.add_argument("--float", action="store_true", help="use the float64 reference instead of the bit-accurate model")
     p.add_argument("--config", metavar="TOML", help="model parameters and formats")
     p.add_argument("--clip", action="store_true", help="saturate out-of-range inputs instead of failing")
@@ -53,7 +53,7 @@ def run(args):
     from kfpga.flows.analysis import float_run
 
     check_output_file(args.output, option="--output", inputs=(args.input, args.config), extensions=(".csv", ".txt"))
-    config = common.load_config(args)
+    config = loading.load_config(args)
     chosen = _mode(args, config)
     columns_in = chosen[0].columns(config, chosen[1]) if chosen else config.inputs
     coasts = not chosen and config.spec.model.variants[args.variant].predict is not None
@@ -89,7 +89,7 @@ def run(args):
         note.append(f"{samples.clipped} input value(s) saturated to the 16-bit range (--clip)")
     if "overflow" in columns:
         note.append(f"{int(np.count_nonzero(columns['overflow']))} sample(s) with overflow")
-    common.info("; ".join(note))
+    output.info("; ".join(note))
     return 0
 
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from kfpga.cli import common
+from kfpga.cli import options, output
 from kfpga.core import registry
 
 
@@ -11,7 +11,7 @@ def add_parser(sub):
                        description="List every registered filter with its variants, its inputs and outputs, and "
                                    "the document it comes from. Any of them can be given to the other commands "
                                    "with --filter NAME, or by [filter] name in a config file.")
-    common.add_json(p, "print the list as JSON")
+    options.add_json(p, "print the list as JSON")
     p.set_defaults(func=run)
 
 
@@ -25,7 +25,7 @@ def run(args):
              "evaluation": s.evaluation is not None, "scenarios": list(s.model.scenarios),
              "default": s.name == registry.DEFAULT} for s in registry.specs()]
     if args.json:
-        common.emit_json(rows)
+        output.emit_json(rows)
         return 0
     for r in rows:
         also = f" (also: {', '.join(r['aliases'])})" if r["aliases"] else ""

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from kfpga.cli import common
+from kfpga.cli import loading, options, output
 from kfpga.core import registry
 from kfpga.core.errors import UsageError
 
@@ -11,13 +11,13 @@ def add_parser(sub):
     p = sub.add_parser("formats", help="show the quantisation formats (or write a config file to edit)",
                        description="Show every quantisation point with its format, the range it covers and the "
                                    "range the float analysis found; --toml prints a complete config file.")
-    common.add_filter_args(p, variant=False)
+    options.add_filter_args(p, variant=False)
     p.add_argument("--config", metavar="TOML", help="config to show (default: the built-in defaults)")
     p.add_argument("--toml", action="store_true",
                    help="print the config as TOML, the formats commented out (defaults that follow the parameters)")
     p.add_argument("--pin-formats", action="store_true",
                    help="with --toml: write the formats as settings, so they stay fixed when a parameter changes")
-    common.add_json(p, "print the table as JSON")
+    options.add_json(p, "print the table as JSON")
     p.set_defaults(func=run)
 
 
@@ -88,13 +88,13 @@ def run(args):
     if args.toml and args.json:
         raise UsageError("--toml and --json are two ways to print the same: choose one")
     if args.pin_formats and not args.toml:
-        common.not_with("--pin-formats", "the table", "it says how --toml writes the formats")
-    config = common.load_config(args)
-    common.warn_precision(config)
+        options.not_with("--pin-formats", "the table", "it says how --toml writes the formats")
+    config = loading.load_config(args)
+    loading.warn_precision(config)
     if args.toml:
         print(config.to_toml(formats=args.pin_formats), end="")
     elif args.json:
-        common.emit_json(formats_table(config))
+        output.emit_json(formats_table(config))
     else:
         _print(formats_table(config))
         for line in budget_lines(config):

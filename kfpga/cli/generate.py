@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from kfpga.cli import common
+from kfpga.cli import design, loading, options, output
 from kfpga.core.errors import UsageError
 from kfpga.hw.cores import make_core
 
@@ -15,14 +15,14 @@ def add_parser(sub):
                                    "filter core, output port) and a complete Quartus II 13.0sp1 project into DIR: "
                                    ".qpf, .qsf (device, sources, pins from the pin table), .sdc, manifest.json, "
                                    "README.txt, and the Verilator lint waivers.")
-    common.add_design_args(p, "1: filter one ADC channel; 6: sample all six with one HOLD and filter each (default: 1)")
+    options.add_design_args(p, "1: filter one ADC channel; 6: sample all six with one HOLD and filter each (default: 1)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="output folder (created; a folder it wrote before is replaced whole)")
-    p.add_argument("--channel", type=common.adc_channel, metavar="CH",
+    p.add_argument("--channel", type=options.adc_channel, metavar="CH",
                    help="the channel of --channels 1: 0..5 or A0, A1, B0, B1, C0, C1 (default: A0)")
     p.add_argument("--ratio", type=int, metavar="N", help="system clock / ADC clock (default: 10)")
     p.add_argument("--pins", metavar="CSV", help="pin table for your board (default: constraints/pins.csv)")
-    p.add_argument("--out-field", metavar="FIELD", help=common.out_field_help())
+    p.add_argument("--out-field", metavar="FIELD", help=options.out_field_help())
     p.add_argument("--no-lint", action="store_true", help="skip the Verilator lint and Icarus parse checks")
     p.add_argument("--ignore-timing", action="store_true",
                    help="write a design whose estimated Fmax misses the clock anyway (a warning, recorded in the "
@@ -33,8 +33,8 @@ def add_parser(sub):
                         "self-checking testbench in tb/; --channels N is then its channel states (1..256)")
     p.add_argument("--prefix", metavar="NAME", help="with --core-only: the core's module name, and the prefix of its "
                                                     "submodules (default: kfpga_FILTER)")
-    common.add_bus_args(p)
-    common.add_quiet(p)
+    options.add_bus_args(p)
+    options.add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -42,10 +42,10 @@ def run(args):
     if args.core_only:
         return _run_core_only(args)
     if args.prefix is not None:
-        common.not_with("--prefix", "the board's design", "it names the core of --core-only")
+        options.not_with("--prefix", "the board's design", "it names the core of --core-only")
     for option, value in (("--bus", args.bus), ("--missing", args.missing or None)):
         if value is not None:
-            common.not_with(option, "the board's design", "the board's top has no bus pins and its ADC measures every "
+            options.not_with(option, "the board's design", "the board's top has no bus pins and its ADC measures every "
                                                           "sample: use it with --core-only")
     args.ratio = 10 if args.ratio is None else args.ratio
     return _run_board(args)
@@ -59,20 +59,20 @@ def _run_core_only(args):
     for option, value in (("--pins", args.pins), ("--ratio", args.ratio), ("--channel", args.channel),
                           ("--out-field", args.out_field), ("--prefilter", getattr(args, "prefilter", None))):
         if value is not None:
-            common.not_with(option, "--core-only", "the core alone has no ADC, no pins and every output field")
+            options.not_with(option, "--core-only", "the core alone has no ADC, no pins and every output field")
     check_output_dir(args.out, option="--out", marker="manifest.json")
-    config = common.load_config(args, hardware=True)
-    common.warn_precision(config)
-    prefix = common.core_prefix(args, config)
-    common.check_architecture(args, config)
-    common.check_bus_args(args, config)
-    options = {**({"missing": True} if args.missing else {}), **({"bus": args.bus} if args.bus else {})}
+    config = loading.load_config(args, hardware=True)
+    loading.warn_precision(config)
+    prefix = design.core_prefix(args, config)
+    design.check_architecture(args, config)
+    design.check_bus_args(args, config)
+    core_options = {**({"missing": True} if args.missing else {}), **({"bus": args.bus} if args.bus else {})}
     try:
-        make_core(config, args.variant, channels=args.channels, **options,
+        make_core(config, args.variant, channels=args.channels, **core_options,
                               **({} if args.architecture in (None, "auto") else {"architecture": args.architecture}))
     except ValueError as exc:
         raise UsageError(f"--channels {args.channels}: {exc}") from None
-    architecture = common.architecture(args, config, args.channels)
+    architecture = design.architecture(args, config, args.channels)
     timing = _timing(args, config, architecture)
     cost = None
     if args.bus:
@@ -103,22 +103,22 @@ def _run_board(args):
     from kfpga.hw.top import out_field
 
     check_output_dir(args.out, option="--out", marker="manifest.json")
-    common.check_channel(args)
-    config = common.load_config(args, hardware=True)
-    common.warn_precision(config)
-    common.check_channel(args, config)
+    design.check_channel(args)
+    config = loading.load_config(args, hardware=True)
+    loading.warn_precision(config)
+    design.check_channel(args, config)
     if args.ratio < 2:
         raise UsageError(f"--ratio must be >= 2, not {args.ratio}")
     try:
         field = out_field(config, args.out_field)
     except ValueError as exc:
         raise UsageError(f"--out-field: {exc}") from None
-    pre = common.prefilter(args)
-    sensors = common.sensors(args)
-    common.check_sensors(args, pre)
-    common.check_rate(args, config)
+    pre = options.prefilter(args)
+    sensors = design.sensors(args)
+    design.check_sensors(args, pre)
+    design.check_rate(args, config)
     _check_pins(config, field, args.pins, args.ratio, sensors)  # every refusal before the design search prints anything
-    architecture = common.architecture(args, config, args.channels)
+    architecture = design.architecture(args, config, args.channels)
     timing = _timing(args, config, architecture)
     with atomic_dir(args.out) as folder:  # the folder appears whole, replacing the one written before
         manifest = write_project(folder, config, variant=args.variant, six_channel=args.channels == 6,
@@ -173,28 +173,28 @@ def _timing(args, config, architecture):
     from kfpga.hw.generate import figures_only
 
     missing, bus = getattr(args, "missing", False), getattr(args, "bus", None)
-    every = args.candidates or common.explore(config, args.variant, args.channels, quiet=args.quiet, missing=missing,
+    every = args.candidates or design.explore(config, args.variant, args.channels, quiet=args.quiet, missing=missing,
                                               bus=bus)
-    options = {**({"missing": True} if missing else {}), **({"bus": bus} if bus else {})}
+    core_options = {**({"missing": True} if missing else {}), **({"bus": bus} if bus else {})}
     core = figures_only(make_core(config, args.variant, channels=args.channels, architecture=architecture,
-                                              **({} if args.stages is None else {"stages": args.stages}), **options))
-    design = next(c for c in every if c.architecture == architecture and c.stages == getattr(core, "stages", None))
-    if not design.fits:
-        raise UsageError(f"the {design.label} design does not fit the EP2C20: it takes {design.over_device}")
+                                              **({} if args.stages is None else {"stages": args.stages}), **core_options))
+    chosen = next(c for c in every if c.architecture == architecture and c.stages == getattr(core, "stages", None))
+    if not chosen.fits:
+        raise UsageError(f"the {chosen.label} chosen does not fit the EP2C20: it takes {chosen.over_device}")
     clock = config.board.clock_hz / 1e6
-    record = {"fmax_mhz_estimate": design.fmax_mhz, "clock_mhz": clock, "meets_clock": design.fmax_mhz >= clock,
-              "worst_path": design.worst_path, "logic_cells": design.logic_cells}
-    if design.fmax_mhz >= clock:
+    record = {"fmax_mhz_estimate": chosen.fmax_mhz, "clock_mhz": clock, "meets_clock": chosen.fmax_mhz >= clock,
+              "worst_path": chosen.worst_path, "logic_cells": chosen.logic_cells}
+    if chosen.fmax_mhz >= clock:
         return record
     better = choose(every)
     how = f"--architecture {better.architecture}" + (f" --stages {better.stages}" if better and better.stages else "") \
         if better else ""
     alternative = f"; {better.label} meets it ({how})" if better else ""
-    message = (f"the {design.label} design is estimated at {design.fmax_mhz:g} MHz, below the {clock:g} MHz clock "
-               f"(worst path {design.worst_path}){alternative}")
+    message = (f"the {chosen.label} chosen is estimated at {chosen.fmax_mhz:g} MHz, below the {clock:g} MHz clock "
+               f"(worst path {chosen.worst_path}){alternative}")
     if not args.ignore_timing:
         raise UsageError(message + "; --ignore-timing writes it anyway")
-    common.info(f"warning: {message}; written anyway (--ignore-timing), the manifest records it")
+    output.info(f"warning: {message}; written anyway (--ignore-timing), the manifest records it")
     record["ignored"] = True
     return record
 
@@ -216,7 +216,7 @@ def _print(args, config, field, manifest, pre):
           f"latency {manifest['core']['latency_cycles']} cycles, {manifest['core']['cycles_per_update']} cycle(s) "
           f"per update; compile with: cd {args.out} && quartus_sh --flow compile {TOP_NAME}")
     if pre is not None:
-        print(f"  {pre.filter} pre-filter before the core: {common.describe_params(pre.params)}, "
+        print(f"  {pre.filter} pre-filter before the core: {loading.describe_params(pre.params)}, "
               f"{manifest['prefilter']['channels']} channel state(s), {pre.spec.hardware.prefilter.delay} samples late, "
               f"{manifest['prefilter']['latency_cycles']} cycles of latency")
 

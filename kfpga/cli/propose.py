@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kfpga.cli import common
+from kfpga.cli import loading, options, output
 from kfpga.core import registry
 from kfpga.core.errors import UsageError
 
@@ -22,22 +22,22 @@ def add_parser(sub):
                                    "multiplier operands within 18 bits, then trims register bits; bits trims the "
                                    "widest points first. Prints a table; --out writes a commented config.",
                        epilog="example: kfpga propose --config my.toml --seeds 10 --out proposed.toml")
-    common.add_signal_args(p, files=True)
-    p.add_argument("--seeds", type=common.positive_int, default=10, metavar="N",
+    options.add_signal_args(p, files=True)
+    p.add_argument("--seeds", type=options.positive_int, default=10, metavar="N",
                    help="scenario seeds searched at once, from --seed on (default: 10)")
-    p.add_argument("--budget", type=common.budget, default=0.01, metavar="PCT",
+    p.add_argument("--budget", type=options.budget, default=0.01, metavar="PCT",
                    help="how far the fixed RMSE may be from float's, either way (default: 1%%)")
     p.add_argument("--objective", choices=("multipliers", "bits"), default="multipliers",
                    help="what to save first (default: multipliers)")
     p.add_argument("--out", metavar="TOML", help="write the proposal as a config file")
-    common.add_json(p, "print the proposal as JSON")
-    common.add_quiet(p)
+    options.add_json(p, "print the proposal as JSON")
+    options.add_quiet(p)
     p.set_defaults(func=run, all_variants=True)
 
 
 def _progress(quiet):
     """A callback that shows what is being tried; its ``tick`` counts the candidates."""
-    bar = None if quiet else common.progress_bar(desc="propose", unit="candidate")
+    bar = None if quiet else output.progress_bar(desc="propose", unit="candidate")
 
     def step(text):
         if bar is not None:
@@ -75,13 +75,13 @@ def _scenario(args, config):
     from kfpga.flows.propose import Signal
     from kfpga.model import scenarios
 
-    n = common.check_samples(args.samples or 20000, runs=args.seeds)
-    first = common.pick_seed(args.seed)
+    n = loading.check_samples(args.samples or 20000, runs=args.seeds)
+    first = output.pick_seed(args.seed)
     seeds = list(range(first, first + args.seeds))
     runs = [scenarios.for_config(args.scenario, n, s, config) for s in seeds]
     for _, y in runs:
         scenarios.check_rails(args.scenario, y)
-    common.info(f"seeds {seeds[0]}..{seeds[-1]} (replay with --seed {first} --seeds {args.seeds})")
+    output.info(f"seeds {seeds[0]}..{seeds[-1]} (replay with --seed {first} --seeds {args.seeds})")
     signal = Signal(np.stack([t for t, _ in runs]), _stack([y for _, y in runs]), [f"seed {s}" for s in seeds])
     return [signal], [f"scenario {args.scenario}, {n} samples, seeds {seeds[0]}..{seeds[-1]}"]
 
@@ -99,14 +99,14 @@ def run(args):
     from kfpga.core.paths import check_output_file, write_text
     from kfpga.flows.propose import proposal_toml, propose
 
-    common.check_signal_args(args)
+    loading.check_signal_args(args)
     inputs = ([args.config] if args.config else []) + (args.input or [])
     out = str(check_output_file(args.out, option="--out", inputs=inputs, extensions=(".toml",))) if args.out else None
     variant = args.variant
     args.variant = None
-    config = common.load_config(args)  # every variant is checked below
+    config = loading.load_config(args)  # every variant is checked below
     args.variant = variant
-    common.require_word_lengths(config, "propose")
+    loading.require_word_lengths(config, "propose")
     variants = _variants(args, config)
     if args.settle is not None and args.settle < 0:
         raise UsageError(f"--settle must be >= 0, not {args.settle}")
@@ -130,7 +130,7 @@ def run(args):
                "check": result.metrics, "margin": result.metrics["margin"], "candidates": result.evaluations,
                "seconds": result.seconds, "notes": result.notes, "out": out}
     if args.json:
-        common.emit_json(summary)
+        output.emit_json(summary)
         return 0
     _print(config, args, variants, described, rows, result, out)
     return 0

@@ -7,7 +7,7 @@ import dataclasses
 import json
 import tomllib
 
-from kfpga.cli import common
+from kfpga.cli import loading, options, output
 from kfpga.core.errors import ConfigError, UsageError
 
 FORMATS = ("table", "c", "tcl", "json")
@@ -24,7 +24,7 @@ def add_parser(sub):
                                    "value that does not fit its format, or a change of the model's shape (an entry "
                                    "of F that is 0 or a shift, built into the core), is refused. --regmap writes the "
                                    "core's register map (SystemRDL, C header, Markdown).")
-    common.add_filter_args(p)
+    options.add_filter_args(p)
     p.add_argument("--config", metavar="TOML", help="the core's config (the one it was generated from: its formats)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", dest="settings",
                    help="a new model parameter, the value in TOML (Q=1.5, R=[[16.0]], x0=[0.0, 1.0]); repeat for "
@@ -70,7 +70,7 @@ def run(args):
     if args.out:
         check_output_file(args.out, option="--out", inputs=(args.config,), extensions=(".h", ".tcl", ".txt", ".json",
                                                                                        ".md", ".csv"))
-    config = common.load_config(args, hardware=True)
+    config = loading.load_config(args, hardware=True)
     changes = _parse_settings(args.settings, config.spec)
     program = program_for(config, args.variant, missing=args.missing)
     if not program.settings:
@@ -93,7 +93,7 @@ def run(args):
         from pathlib import Path
 
         Path(args.out).write_text(text)
-        common.info(f"{len(writes)} bus writes for {', '.join(changes) or 'the config itself'} -> {args.out}")
+        output.info(f"{len(writes)} bus writes for {', '.join(changes) or 'the config itself'} -> {args.out}")
     else:
         print(text, end="")
     return 0

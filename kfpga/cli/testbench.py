@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from kfpga.cli import common
+from kfpga.cli import design, loading, options, output
 from kfpga.core.errors import UsageError
 
 
@@ -18,18 +18,18 @@ def add_parser(sub):
                                    "with the bit-accurate model and ends with PASS or FAIL and an exit status. "
                                    "Exit code 0: written (and, with --run-icarus, passed); 1: the Icarus run failed; "
                                    "2: bad arguments.")
-    common.add_design_args(p, "filter one channel or all six (default: 1)")
-    p.add_argument("--channel", type=common.adc_channel, metavar="CH", help="channel of --channels 1 (default: A0)")
+    options.add_design_args(p, "filter one channel or all six (default: 1)")
+    p.add_argument("--channel", type=options.adc_channel, metavar="CH", help="channel of --channels 1 (default: A0)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="the folder to write (created; a folder it wrote before is replaced whole)")
-    common.add_adc_source_args(p)
+    options.add_adc_source_args(p)
     p.add_argument("--run-icarus", action="store_true", help="also compile and run it with Icarus Verilog")
     p.add_argument("--core-only", action="store_true",
                    help="the testbench of the core alone (the folder of 'generate --core-only', its tb/ with "
                         "--samples estimates of --scenario and --seed, random gaps on both streams); --channels N "
                         "is then its channel states")
     p.add_argument("--prefix", metavar="NAME", help="with --core-only: the core's module name (default: kfpga_FILTER)")
-    common.add_json(p)
+    options.add_json(p)
     p.set_defaults(func=run)
 
 
@@ -37,7 +37,7 @@ def run(args):
     if args.core_only:
         return _run_core_only(args)
     if args.prefix is not None:
-        common.not_with("--prefix", "the board's testbench", "it names the core of --core-only")
+        options.not_with("--prefix", "the board's testbench", "it names the core of --core-only")
     return _run_board(args)
 
 
@@ -52,19 +52,19 @@ def _run_core_only(args):
     for option, value in (("--channel", args.channel), ("--input", args.input), ("--glitches", getattr(args, "glitches", None)),
                           ("--prefilter", getattr(args, "prefilter", None))):
         if value is not None:
-            common.not_with(option, "--core-only", "the core's testbench drives its own stream from a scenario")
+            options.not_with(option, "--core-only", "the core's testbench drives its own stream from a scenario")
     check_output_dir(args.out, option="--out", marker="manifest.json")
     if args.run_icarus:
         ok, why = simulator_available("icarus")
         if not ok:
             raise UsageError(f"--run-icarus: {why}")
-    config = common.load_config(args, hardware=True)
-    prefix = common.core_prefix(args, config)
-    common.check_architecture(args, config)
-    samples = common.check_samples(2000 if args.samples is None else args.samples, kind="simulation")
-    seed = common.pick_seed(args.seed)
-    common.info(f"seed {seed} (replay with --seed {seed})")
-    architecture = common.architecture(args, config, args.channels)
+    config = loading.load_config(args, hardware=True)
+    prefix = design.core_prefix(args, config)
+    design.check_architecture(args, config)
+    samples = loading.check_samples(2000 if args.samples is None else args.samples, kind="simulation")
+    seed = output.pick_seed(args.seed)
+    output.info(f"seed {seed} (replay with --seed {seed})")
+    architecture = design.architecture(args, config, args.channels)
     with atomic_dir(args.out) as folder:
         try:
             manifest = write_core(folder, config, variant=args.variant, prefix=prefix, channels=args.channels,
@@ -75,7 +75,7 @@ def _run_core_only(args):
     result = {"prefix": prefix, "filter": config.filter, "variant": args.variant, "architecture": manifest["architecture"],
               "channels": args.channels, "samples": samples, "seed": seed, "out": str(Path(args.out))}
     if args.run_icarus:
-        common.info("running it on Icarus ...")
+        output.info("running it on Icarus ...")
         tb = Path(args.out) / "tb"
         path = f"{Path(iverilog_path()).parent}{os.pathsep}{os.environ.get('PATH', '')}"  # vvp beside iverilog
         done = subprocess.run(["sh", "run_icarus.sh"], cwd=tb, capture_output=True, text=True,
@@ -98,7 +98,7 @@ def _icarus(code, text):
 def _report(args, result, head, lines):
     """Print (or ``--json``) what was written and the Icarus run; the exit status."""
     if args.json:
-        common.emit_json(result)
+        output.emit_json(result)
     else:
         print(head)
         for line in lines:
@@ -114,28 +114,28 @@ def _run_board(args):
     from kfpga.sim.testbench import run_icarus, write_testbench
 
     check_output_dir(args.out, option="--out", marker="testbench.json")
-    common.check_channel(args)
-    config = common.load_config(args, hardware=True)
-    common.check_channel(args, config)
+    design.check_channel(args)
+    config = loading.load_config(args, hardware=True)
+    design.check_channel(args, config)
     out = Path(args.out)
     if args.run_icarus:
         ok, why = simulator_available("icarus")
         if not ok:
             raise UsageError(f"--run-icarus: {why}")
-    pre = common.prefilter(args)
-    common.check_sensors(args, pre)
-    common.check_rate(args, config)
-    common.check_architecture(args, config)
-    params = common.adc_source_params(args, config)
-    architecture = common.architecture(args, config, args.channels)
-    common.info(f"writing the testbench of {args.samples} estimates into {out} ...")
+    pre = options.prefilter(args)
+    design.check_sensors(args, pre)
+    design.check_rate(args, config)
+    design.check_architecture(args, config)
+    params = design.adc_source_params(args, config)
+    architecture = design.architecture(args, config, args.channels)
+    output.info(f"writing the testbench of {args.samples} estimates into {out} ...")
     with atomic_dir(out) as folder:  # the folder appears whole, replacing the one written before
         info = write_testbench(folder, config, variant=args.variant, six=args.channels == 6, channel=args.channel,
                                samples=args.samples, params=params, prefilter=pre, architecture=architecture,
-                               stages=args.stages, sensors=common.sensors(args))
+                               stages=args.stages, sensors=design.sensors(args))
     result = {**info, "out": str(out)}
     if args.run_icarus:
-        common.info("running it on Icarus ...")
+        output.info("running it on Icarus ...")
         result.update(_icarus(*run_icarus(out)))
     head = (f"kfpga testbench: {info['filter']} filter, {info['variant']} core, {info['channels']}, "
             f"{info['samples']} estimates, in {out}/")
