@@ -77,11 +77,11 @@ class AdcFrontend(wiring.Component):
     ----------
     six_channel, channel, ratio, timeout_periods:
         As :class:`FilterSystem`.
-    period:
+    conversion_cycles:
         System cycles from one conversion's start to the next (the conversion timer); ``None``:
         the ADC converts as fast as it can. A conversion starts at the first ADC clock edge after
         the timer's tick, so each start is up to ``ratio`` cycles late, never early, and the
-        rate is exactly ``clock / period``.
+        rate is exactly ``clock / conversion_cycles``.
 
     Members
     -------
@@ -92,10 +92,10 @@ class AdcFrontend(wiring.Component):
         Sticky EOC timeout flag.
     """
 
-    def __init__(self, *, six_channel=False, channel=0, ratio=10, timeout_periods=40, period=None):
-        if period is not None and (not isinstance(period, int) or period < 1):
-            raise ValueError(f"period must be a positive number of system cycles, not {period!r}")
-        self.period = period
+    def __init__(self, *, six_channel=False, channel=0, ratio=10, timeout_periods=40, conversion_cycles=None):
+        if conversion_cycles is not None and (not isinstance(conversion_cycles, int) or conversion_cycles < 1):
+            raise ValueError(f"conversion_cycles must be a positive number of system cycles, not {conversion_cycles!r}")
+        self.conversion_cycles = conversion_cycles
         self.divider = ClockDivider(ratio=ratio)
         self.controller = ADS8364Controller(channel=channel, six_channel=six_channel, timeout_periods=timeout_periods)
         members = _pin_members(ADC_PINS)
@@ -131,14 +131,14 @@ class AdcFrontend(wiring.Component):
 
     def _timer(self, m, ctrl, divider):
         """The controller's enable: always (free running), or from the conversion timer: a tick
-        every ``period`` cycles sets ``due``; the conversion's start (the controller leaving CONV0
+        every ``conversion_cycles`` cycles sets ``due``; the conversion's start (the controller leaving CONV0
         on a strobe with its start bit) clears it."""
-        if self.period is None:
+        if self.conversion_cycles is None:
             return 1
-        count = Signal(range(self.period), init=self.period - 1)
+        count = Signal(range(self.conversion_cycles), init=self.conversion_cycles - 1)
         due = Signal(init=1)  # the first conversion right after reset
         tick = count == 0
-        m.d.sync += count.eq(Mux(tick, self.period - 1, count - 1))
+        m.d.sync += count.eq(Mux(tick, self.conversion_cycles - 1, count - 1))
         started = divider.strobe & (ctrl.state == CONV0) & ctrl.word.start
         with m.If(tick):
             m.d.sync += due.eq(1)
@@ -282,7 +282,7 @@ class FilterSystem(wiring.Component):
         channels = 6 if six_channel or len(self.adc) > 1 else 1
         config.board.check(channels, ratio, self.sensors)
         self.frontend = AdcFrontend(six_channel=six_channel or len(self.adc) > 1, channel=self.channel, ratio=ratio,
-                                    timeout_periods=timeout_periods, period=config.board.period_cycles(self.sensors))
+                                    timeout_periods=timeout_periods, conversion_cycles=config.board.conversion_cycles(self.sensors))
         options = {} if stages is None else {"stages": stages}
         self.core = make_core(config, self.variant, channels=6 if six_channel else self.sensors,
                                    architecture=architecture, **options)

@@ -30,13 +30,13 @@ rounding rule; by default ``x3`` is a 16-bit code rounded to the nearest, ties u
 cannot overflow. The test ``|x - x3| > threshold`` is exact (the threshold is a constant of
 point ``threshold``), and the output ``y`` (point ``y``) is either the sample or ``x3``.
 
-**Angles** (``period``, the codes of a full turn: 36000 for a heading in 0.01 deg codes): the
+**Angles** (``turn``, the codes of a full turn: 36000 for a heading in 0.01 deg codes): the
 window and the medians are kept in the frame of the channel's newest sample. When a sample is
 more than half a turn from the one before (a heading crossing +-180 deg), every stored value of
 the channel moves by a full turn with it (:func:`frame_shift`), so the medians, the Hanning value
 and the threshold test see a continuous angle; the output is brought back into
-``[-period/2, period/2)``. A heading crossing +-180 deg passes unchanged (a code of exactly
-``+period/2``, +180.00 deg, comes out as ``-period/2``, the same angle), and an outlier next to
+``[-turn/2, turn/2)``. A heading crossing +-180 deg passes unchanged (a code of exactly
+``+turn/2``, +180.00 deg, comes out as ``-turn/2``, the same angle), and an outlier next to
 the crossing is found as anywhere else. The stored values then need 18 bits (point ``x``).
 
 **Thresholds from physical limits** (the paper, §3): a velocity cannot change by more than
@@ -69,7 +69,7 @@ MIN_OFFLINE = 16
 #: The format of the "primed" flag of a channel's state (0 after reset, 1 once a sample came).
 FLAG = QFormat(2, 0)
 def turn_format(params):
-    """The format of a full turn of an angle (``period``) and of the stored values it moves:
+    """The format of a full turn of an angle (``turn``) and of the stored values it moves:
     two bits above the samples'."""
     return QFormat(params.input_bits + 2, 0)
 #: The widest samples (``input_bits``): a latitude or longitude in 1e-7 deg needs 32.
@@ -111,7 +111,7 @@ class Tukey53HParams:
     threshold:
         A sample further than this from its smoothed value (in input units: codes) is an
         outlier and is replaced; > 0 and at most 65535 (two codes differ by no more).
-    period:
+    turn:
         For an angle, the codes of a full turn (36000 for 0.01 deg codes, 65536 for a binary
         angle): an even integer from 4 to 2**input_bits, the threshold below a quarter of it; a
         heading that crosses half a turn then passes unchanged (module docstring). ``None`` (the
@@ -126,7 +126,7 @@ class Tukey53HParams:
     """
 
     threshold: float = 500.0
-    period: float | None = None
+    turn: float | None = None
     input_bits: int = 16
 
     def __post_init__(self):
@@ -139,15 +139,15 @@ class Tukey53HParams:
             raise ValueError(f"threshold must be > 0 (in codes) and at most {largest:g}, the largest difference "
                              f"of two {bits}-bit samples, not {self.threshold!r}")
         object.__setattr__(self, "threshold", value)
-        if self.period is not None:
-            turn = number("period", self.period)
+        if self.turn is not None:
+            turn = number("turn", self.turn)
             if turn != int(turn) or int(turn) % 2 or not 4 <= turn <= 1 << bits:
-                raise ValueError(f"period must be an even integer 4..{1 << bits} (the codes of a full turn), not "
-                                 f"{self.period!r}")
+                raise ValueError(f"turn must be an even integer 4..{1 << bits} (the codes of a full turn), not "
+                                 f"{self.turn!r}")
             if value >= turn / 4:
-                raise ValueError(f"threshold must be below a quarter of the period ({turn / 4:g} codes), not "
+                raise ValueError(f"threshold must be below a quarter of the turn ({turn / 4:g} codes), not "
                                  f"{value:g}: an angle's outlier test needs the window within half a turn")
-            object.__setattr__(self, "period", float(turn))
+            object.__setattr__(self, "turn", float(turn))
 
 
 POINTS = {
@@ -244,9 +244,9 @@ def decide(ops, k, sample, x3, distance):
 
 
 def frame_shift(ops, k, sample, previous):
-    """For an angle (``period``): the full turn by which the channel's stored values move to the
-    frame of ``sample``, +period when it is more than half a turn above ``previous`` (the stored
-    newest sample), -period when more than half a turn below, else 0; ``None`` without a period."""
+    """For an angle (``turn``): the full turn by which the channel's stored values move to the
+    frame of ``sample``, +turn when it is more than half a turn above ``previous`` (the stored
+    newest sample), -turn when more than half a turn below, else 0; ``None`` without a turn."""
     if "turn" not in k:
         return None
     d = ops.sub(sample, previous)
@@ -255,12 +255,12 @@ def frame_shift(ops, k, sample, previous):
 
 
 def shifted(ops, value, shift):
-    """A stored value moved by the frame shift (unchanged without a period)."""
+    """A stored value moved by the frame shift (unchanged without a turn)."""
     return value if shift is None else ops.rq(ops.add(value, shift), "x", "turned")
 
 
 def wrapped(ops, k, value):
-    """For an angle: ``value`` brought into ``[-period/2, period/2)`` (unchanged without one)."""
+    """For an angle: ``value`` brought into ``[-turn/2, turn/2)`` (unchanged without one)."""
     if "turn" not in k:
         return value
     return ops.select(ops.gt(value, k["half_turn_less"]), ops.sub(value, k["turn"]),
@@ -271,7 +271,7 @@ def window_step(ops, k, x, sample):
     """``(first, window, shift)``: whether this is the channel's first sample (its state then
     fills with it), the window ``[sample, w1, w2, w3, w4]``, newest first (for an angle, in the
     sample's frame), and the frame shift the channel's other stored values take (``None``
-    without a period)."""
+    without a turn)."""
     first = ops.gt(ops.const(1, FLAG, "1"), x["primed"])
     s = ops.rq(sample, "x", "sample")
     shift = frame_shift(ops, k, s, x["w1"])
@@ -300,11 +300,11 @@ def update(ops, k, x, u):
 
 def _constants(params):
     k = {"threshold": Constant(params.threshold, "threshold", "threshold")}
-    if params.period is not None:
-        p, turn = params.period, turn_format(params)
-        k.update(turn=Constant(p, turn, "period"), minus_turn=Constant(-p, turn, "-period"),
-                 half_turn=Constant(p / 2, turn, "period/2"), minus_half_turn=Constant(-p / 2, turn, "-period/2"),
-                 half_turn_less=Constant(p / 2 - 1, turn, "period/2 - 1"), no_turn=Constant(0.0, turn, "0"))
+    if params.turn is not None:
+        p, turn = params.turn, turn_format(params)
+        k.update(turn=Constant(p, turn, "turn"), minus_turn=Constant(-p, turn, "-turn"),
+                 half_turn=Constant(p / 2, turn, "turn/2"), minus_half_turn=Constant(-p / 2, turn, "-turn/2"),
+                 half_turn_less=Constant(p / 2 - 1, turn, "turn/2 - 1"), no_turn=Constant(0.0, turn, "0"))
     return k
 
 
@@ -342,11 +342,11 @@ def _online_float(x, threshold, x3_round=None):
 
 def reference(params, variant, y):
     """The float online smoother along the last axis of ``y``: ``{"y"}`` (exact Hanning values).
-    For an angle the series is unwrapped first (numpy's ``unwrap`` over the period) and the
-    output wrapped back into ``[-period/2, period/2)``."""
-    if params.period is None:
+    For an angle the series is unwrapped first (numpy's ``unwrap`` over the turn) and the
+    output wrapped back into ``[-turn/2, turn/2)``."""
+    if params.turn is None:
         return {"y": _online_float(y, params.threshold)[0]}
-    p = params.period
+    p = params.turn
     out = _online_float(np.unwrap(np.asarray(y, dtype=np.float64), period=p, axis=-1), params.threshold)[0]
     return {"y": (out + p / 2) % p - p / 2}
 
@@ -393,7 +393,7 @@ def _ranges(params, stimulus=None):
     # a median selects a sample, a Hanning value lies between samples: nothing leaves the codes;
     # an angle's frame moves its stored values by up to a turn
     top = float((1 << (params.input_bits - 1)) - 1)
-    stored = top if params.period is None else top + params.period
+    stored = top if params.turn is None else top + params.turn
     return {"x": stored, "x3": stored, "y": top, "threshold": params.threshold}
 
 
@@ -402,7 +402,7 @@ def _default_formats(params, ranges, *, operand_bits, state_frac, max_word=MAX_W
     many bits as it needs, and the fraction bits that hold it within 1 %."""
     frac = precision_frac_bits(params.threshold)
     int_bits = next(i for i in range(2, 20) if QFormat(i, frac).covers(params.threshold))
-    bits = params.input_bits if params.period is None else turn_format(params).int_bits
+    bits = params.input_bits if params.turn is None else turn_format(params).int_bits
     return {"x": QFormat(bits, 0), "x3": QFormat(bits, 0, Rounding.NEAREST), "y": QFormat(params.input_bits, 0),
             "threshold": QFormat(int_bits, frac, Rounding.NEAREST)}
 
@@ -413,8 +413,8 @@ def _validate(config):
 
 def _random_params(rng):
     if rng.random() < 0.25:  # an angle: a heading in 0.01 deg codes, a binary angle, a small turn
-        period = float(rng.choice([36000, 65536, 2 * int(rng.integers(200, 20000))]))
-        return Tukey53HParams(threshold=float(rng.uniform(0.3, period / 5)), period=period)
+        turn = float(rng.choice([36000, 65536, 2 * int(rng.integers(200, 20000))]))
+        return Tukey53HParams(threshold=float(rng.uniform(0.3, turn / 5)), turn=turn)
     return Tukey53HParams(threshold=float(rng.choice([rng.uniform(0.3, 20.0), rng.uniform(20.0, 5000.0)])))
 
 
@@ -422,10 +422,10 @@ def _goals(config, variant, channels=1):
     """No multiplier; 1,400 logic cells for one channel (11 comparators and their multiplexers,
     14 pipeline stages), each further channel about two cells per state bit (its registers,
     their read multiplexer and write enable: 260 for the 8 samples and the flag); every path
-    within the board's timing goal (62.5 MHz estimated). An angle (``period``) stores 18-bit values
+    within the board's timing goal (62.5 MHz estimated). An angle (``turn``) stores 18-bit values
     and moves them by a turn (eight adders and their multiplexers, the turn's tests, the output's
     wrap): 2,000 cells and 300 per further channel."""
-    if config.params.period is not None:
+    if config.params.turn is not None:
         return {"logic_cells": 2000 + 300 * (channels - 1), "mul18": 0, "lut_levels": 12,
                 "worst_path_ns": WORST_PATH_GOAL_NS}
     return {"logic_cells": 1400 + 260 * (channels - 1), "mul18": 0, "lut_levels": 10, "worst_path_ns": WORST_PATH_GOAL_NS}

@@ -525,14 +525,14 @@ def cycles_allowed(config, variant, samples, *, six=False, sensors=1, reads=1, c
     """System cycles a run of ``samples`` estimates may take before it is stopped: generous, as a
     conversion with one read takes 230 system cycles, six reads 380 (for six estimates); a core
     slower than that (the folded core: hundreds of cycles an update) paces the reads, and gets
-    twice its own; a conversion timer adds its period to each conversion."""
+    twice its own; a conversion timer adds its cycles to each conversion."""
     from kfpga.hw.generate import figures_only
 
     base = 600 if reads > 1 or six else 300
     core = figures_only(make_core(config, variant, channels=6 if six else sensors, **(core_options or {})))
     estimates = 6 if six else 1  # per conversion
-    period = config.board.period_cycles(sensors) or 0  # the conversion timer's
-    per_conversion = max(base, estimates * (2 * core.cycles_per_update + 60)) + period
+    timer = config.board.conversion_cycles(sensors) or 0  # the conversion timer's
+    per_conversion = max(base, estimates * (2 * core.cycles_per_update + 60)) + timer
     return per_conversion * -(-samples // estimates) + 20000
 
 

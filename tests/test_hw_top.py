@@ -120,7 +120,7 @@ def test_the_timer_starts_a_conversion_every_period(variant, seed):
     clock / rate cycles (600 here, 83.3 kHz), never faster, and every estimate is the model's."""
     config = FilterConfig(board=Board(sample_rate_hz=50e6 / 600))
     top = FilterSystem(config, variant=variant, channel=0)
-    assert top.frontend.period == 600
+    assert top.frontend.conversion_cycles == 600
     source = scenario_source("sine", 64, seed)
     out, adc, falls = run_system(top, source, 6, max_cycles=6_000)
     # the first conversion right after reset, then one on each tick of the timer (which counts

@@ -112,7 +112,7 @@ def test_angle_core_bit_exact(channels, seed):
 @pytest.mark.cosim
 @pytest.mark.parametrize("simulator", ["verilator", "icarus"])
 def test_angle_core_bit_exact_in_cocotb(simulator, seed):
-    """The generated Verilog with a period, two channels, on both simulators: every integer the model's."""
+    """The generated Verilog with a turn (an angle), two channels, on both simulators: every integer the model's."""
     h = _heading(seed, 400)
     core_is_bit_exact_on(simulator, ANGLE, "online", h, seed, "53h-angle", channels=2)
 

@@ -232,7 +232,7 @@ def test_compare_prefilter_cli(capsys, seed):
     assert m["with_prefilter"]["rmse_fixed"] < 3.0 < 100 < m["without_prefilter"]["rmse_fixed"]
 
 
-ANGLE = FilterConfig(filter="tukey53h", params=th.Tukey53HParams(threshold=300.0, period=36000.0))
+ANGLE = FilterConfig(filter="tukey53h", params=th.Tukey53HParams(threshold=300.0, turn=36000.0))
 
 
 def _heading(seed, n=400):
@@ -252,7 +252,7 @@ def test_a_heading_crossing_half_a_turn_passes_unchanged(seed):
     np.testing.assert_array_equal(out[th.DELAY:], h[:-th.DELAY])
     np.testing.assert_array_equal(th.reference(ANGLE.params, "online", h)["y"][th.DELAY:], h[:-th.DELAY])
     folded = FixedModel(FilterConfig(filter="tukey53h", params=th.Tukey53HParams(threshold=300.0))).run(h).y
-    assert np.any(folded[th.DELAY:] != h[:-th.DELAY])  # without the period it does not
+    assert np.any(folded[th.DELAY:] != h[:-th.DELAY])  # without the turn it does not
 
 
 def test_outliers_next_to_the_crossing_are_found(seed):
@@ -271,10 +271,10 @@ def test_outliers_next_to_the_crossing_are_found(seed):
     np.testing.assert_array_equal(out, ((defined + 18000) % 36000 - 18000)[th.DELAY:])
 
 
-@pytest.mark.parametrize(("kwargs", "message"), [({"period": 36001}, "period must be an even integer"),
-                                                  ({"period": 70000}, "period must be an even integer 4..65536"),
-                                                  ({"period": 1000, "threshold": 300}, "below a quarter of the period")])
-def test_bad_period(kwargs, message):
+@pytest.mark.parametrize(("kwargs", "message"), [({"turn": 36001}, "turn must be an even integer"),
+                                                  ({"turn": 70000}, "turn must be an even integer 4..65536"),
+                                                  ({"turn": 1000, "threshold": 300}, "below a quarter of the turn")])
+def test_bad_turn(kwargs, message):
     with pytest.raises(ValueError, match=message):
         th.Tukey53HParams(**{"threshold": 10.0, **kwargs})
 

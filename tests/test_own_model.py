@@ -156,7 +156,7 @@ def at_100_hz(tmp_path, monkeypatch):
 def test_generate_chooses_a_design_that_meets_the_clock(at_100_hz, capsys, tmp_path):
     assert main(["generate", "--config", str(at_100_hz), "--out", "g", "--no-lint", "--quiet"]) == 0
     m = json.loads((tmp_path / "g" / "manifest.json").read_text())
-    assert m["sample_rate_hz"] == 100 and m["conversion_period_cycles"] == 500000
+    assert m["sample_rate_hz"] == 100 and m["conversion_cycles"] == 500000
     # at 100 updates a second the folded core has cycles to spare, and is the cheapest design
     assert m["timing"]["fmax_mhz_estimate"] >= 62.5 and m["timing"]["logic_cells"] <= 500
     assert m["core"]["architecture"] == "folded"

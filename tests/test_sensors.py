@@ -53,7 +53,7 @@ def test_port_widths_follow_the_sensors():
 def test_the_timer_converts_each_sensor_at_the_rate():
     """N sensors at rate r: one conversion every clock / (r N) cycles, each sensor at r."""
     board = Board(sample_rate_hz=100.0)
-    assert board.period_cycles(1) == 500_000 and board.period_cycles(64) == 7812
+    assert board.conversion_cycles(1) == 500_000 and board.conversion_cycles(64) == 7812
     assert board.actual_rate_hz(64) == pytest.approx(50e6 / 7812 / 64)
     assert abs(board.actual_rate_hz(64) / 100 - 1) < 1e-4
     Board(sample_rate_hz=840.0).check(1, 10, 256)  # 215 kSPS on one channel: within

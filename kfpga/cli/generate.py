@@ -180,7 +180,7 @@ def _timing(args, config, architecture):
                                               **({} if args.stages is None else {"stages": args.stages}), **core_options))
     chosen = next(c for c in every if c.architecture == architecture and c.stages == getattr(core, "stages", None))
     if not chosen.fits:
-        raise UsageError(f"the {chosen.label} chosen does not fit the EP2C20: it takes {chosen.over_device}")
+        raise UsageError(f"the {chosen.label} design does not fit the EP2C20: it takes {chosen.over_device}")
     clock = config.board.clock_hz / 1e6
     record = {"fmax_mhz_estimate": chosen.fmax_mhz, "clock_mhz": clock, "meets_clock": chosen.fmax_mhz >= clock,
               "worst_path": chosen.worst_path, "logic_cells": chosen.logic_cells}
@@ -190,7 +190,7 @@ def _timing(args, config, architecture):
     how = f"--architecture {better.architecture}" + (f" --stages {better.stages}" if better and better.stages else "") \
         if better else ""
     alternative = f"; {better.label} meets it ({how})" if better else ""
-    message = (f"the {chosen.label} chosen is estimated at {chosen.fmax_mhz:g} MHz, below the {clock:g} MHz clock "
+    message = (f"the {chosen.label} design is estimated at {chosen.fmax_mhz:g} MHz, below the {clock:g} MHz clock "
                f"(worst path {chosen.worst_path}){alternative}")
     if not args.ignore_timing:
         raise UsageError(message + "; --ignore-timing writes it anyway")

@@ -61,7 +61,7 @@ class Board:
                 raise ValueError(f"board.{name} must be a positive number of Hz, not {value!r}")
             object.__setattr__(self, name, float(value))
 
-    def period_cycles(self, sensors=1):
+    def conversion_cycles(self, sensors=1):
         """System cycles between conversions (``None``: free running); ``sensors`` take turns on
         one ADC channel, each at the sample rate."""
         if self.sample_rate_hz is None:
@@ -69,8 +69,8 @@ class Board:
         return max(1, round(self.clock_hz / (self.sample_rate_hz * sensors)))
 
     def actual_rate_hz(self, sensors=1):
-        """The rate of each channel (each sensor) the whole-number period gives."""
-        cycles = self.period_cycles(sensors)
+        """The rate of each channel (each sensor) the whole number of conversion cycles gives."""
+        cycles = self.conversion_cycles(sensors)
         return None if cycles is None else self.clock_hz / (cycles * sensors)
 
     def max_rate_hz(self, channels, ratio=10, sensors=1):

@@ -298,7 +298,7 @@ def _manifest(config, variant, top, verilog, assigned, ports, out_field, data_bi
         "core": {"architecture": top.architecture, "stages": getattr(core, "stages", None),
                  "latency_cycles": core.latency, "cycles_per_update": core.cycles_per_update},
         "sample_rate_hz": config.board.actual_rate_hz(sensors),
-        "conversion_period_cycles": config.board.period_cycles(sensors),
+        "conversion_cycles": config.board.conversion_cycles(sensors),
         "timing": timing,
         "prefilter": None if prefilter is None else {
             "filter": prefilter.filter, "model": _jsonable(dataclasses.asdict(prefilter.params)),
@@ -374,7 +374,7 @@ def _readme(variant, six_channel, ratio, manifest):
         f"channel {manifest['channel']}" if len(adc) == 1 else
         "channels " + ", ".join(f"{c} ({name})" for name, c in adc.items()) + ", one update per conversion")
     out = manifest["out_data"]
-    rate = (f"a conversion every {manifest['conversion_period_cycles']} system cycles ({manifest['sample_rate_hz']:g} Hz"
+    rate = (f"a conversion every {manifest['conversion_cycles']} system cycles ({manifest['sample_rate_hz']:g} Hz"
             + (" each" if sensors else "") + ")"
             if manifest["sample_rate_hz"] else "the ADC converting as fast as the core takes samples")
     est = manifest.get("timing")

@@ -21,7 +21,7 @@ class NavigationScenario:
     A ship at 6 m/s turns from 40 to 130 deg at 0.5 deg/s, speeds up to 9 m/s at 0.02 m/s^2,
     turns back to 70 deg; the sea adds a yaw of 1.5 deg (period 12 s) and a surge of 0.1 m/s
     (period 8 s); the sensors add white noise (0.01 m/s, 0.05 deg). Codes: 1 mm/s and
-    0.01 deg (a heading: its period is 36000 codes), latitude and longitude from 59.9 deg N,
+    0.01 deg (a full turn of the heading is 36000 codes), latitude and longitude from 59.9 deg N,
     10.7 deg E in 1e-7 deg (32-bit samples, INS position noise 1 m). Thresholds from the
     physical limits (the paper, §3): ``a_max T`` for the velocities, ``omega_max T`` for the
     heading, ``V_max T / R`` for latitude and longitude.
@@ -54,7 +54,7 @@ class NavigationScenario:
 def navigation_signals(s, rng):
     """``{signal: (truth in codes (float), measured codes, threshold in codes, lsb, unit, params)}``:
     the noise-free signal, what the sensor gives before any outlier, and the smoother's other
-    parameters (the heading's period, the positions' 32-bit samples)."""
+    parameters (the positions' 32-bit samples)."""
     t = np.arange(s.seconds) * s.T
     n = len(t)
 
