@@ -1,7 +1,7 @@
 """The alpha-beta tracker's cores ([Chen]): one pipelined loop shared by many tracks.
 
 The update is the model's own (``model/alphabeta.py``), through the steps of the constant-velocity
-loop (``hw/cvloop.py``), which the paper's steady-state filter runs too: xp = x + T v, e = z - xp,
+loop (``hw/cvloop.py``), which [Zhong]'s steady-state filter runs too: xp = x + T v, e = z - xp,
 x = xp + alpha e, T v = T v + beta e; the two differ only in their gains and names.
 
 * :class:`SteadyCore`: the loop over L register stages with ``channels`` independent

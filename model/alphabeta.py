@@ -6,7 +6,7 @@ Per axis of a track, with the measurement ``z`` and the sample period ``T``::
     x  = xp + alpha (z - xp)
     v  = v + (beta / T) (z - xp)
 
-It runs in the datapath units of the paper's 2-state Kalman filter (``model/cvloop.py``): the state is
+It runs in the datapath units of [Zhong]'s 2-state Kalman filter (``model/cvloop.py``): the state is
 ``x`` and the rate per sample ``T v``, so T never multiplies inside the loop and the update is
 the steady-state Kalman update with the gains ``alpha`` and ``beta`` (the steady-state Kalman
 filter *is* an alpha-beta filter with ``alpha = K1``, ``beta = T K2``; the tests hold the two
@@ -22,9 +22,9 @@ Choosing beta from alpha (:func:`benedict_bordner`, :func:`critically_damped`,
   filter of this model (white noise on the rate, ``G = [0, 1]``): every Q/R gives a pair on it;
 * critically damped (both poles of the loop at ``theta``: the fading-memory filter),
   ``alpha = 1 - theta^2``, ``beta = (1 - theta)^2``;
-* the paper ([Chen]) uses alpha = 0.5 and states beta = 0.5 from its formula (7), which is
+* [Chen] uses alpha = 0.5 and states beta = 0.5 from its formula (7), which is
   not legible; neither relation above gives 0.5 at alpha = 0.5 (0.167 and 0.086). The preset
-  ``ab-paper`` takes the paper's stated values as printed; ``beta = alpha^2 / (1 - alpha)`` is a
+  ``ab-paper`` takes [Chen]'s stated values as printed; ``beta = alpha^2 / (1 - alpha)`` is a
   relation that gives them, a guess at (7) only.
 
 Stability: ``0 < alpha < 2`` and ``0 < beta < 4 - 2 alpha`` (the poles of the loop inside the
@@ -69,7 +69,7 @@ def critically_damped(alpha):
 
 
 def kalman_relation(alpha):
-    """``beta = alpha^2 / (1 - alpha)``: one relation that gives the paper's beta = 0.5 at alpha = 0.5."""
+    """``beta = alpha^2 / (1 - alpha)``: one relation that gives [Chen]'s beta = 0.5 at alpha = 0.5."""
     if not 0 < alpha < 1:
         raise ValueError(f"alpha must be in (0, 1) for beta = alpha^2 / (1 - alpha), not {alpha!r}")
     return alpha * alpha / (1.0 - alpha)
@@ -82,7 +82,7 @@ def stable(alpha, beta):
 
 @dataclass(frozen=True, kw_only=True)
 class AlphaBetaParams:
-    """Parameters of one axis of an alpha-beta tracker (defaults: the paper's alpha = beta = 0.5, T = 1).
+    """Parameters of one axis of an alpha-beta tracker (defaults: [Chen]'s alpha = beta = 0.5, T = 1).
 
     Parameters
     ----------
@@ -321,10 +321,10 @@ SPEC = FilterSpec(
         validate=_validate,
         random_params=_random_params,
         presets={
-            "ab-paper": ("the paper's tracker ([Chen]): alpha = beta = 0.5 as printed, T = 1", AlphaBetaParams),
-            "ab-bb": ("Benedict-Bordner at the paper's alpha = 0.5: beta = alpha^2/(2 - alpha) = 0.1667, T = 1",
+            "ab-paper": ("[Chen]'s tracker: alpha = beta = 0.5 as printed, T = 1", AlphaBetaParams),
+            "ab-bb": ("Benedict-Bordner at [Chen]'s alpha = 0.5: beta = alpha^2/(2 - alpha) = 0.1667, T = 1",
                       lambda: AlphaBetaParams(alpha=0.5, beta=benedict_bordner(0.5))),
-            "ab-critical": ("critically damped at the paper's alpha = 0.5: beta = (1 - sqrt(1 - alpha))^2 = 0.0858, T = 1",
+            "ab-critical": ("critically damped at [Chen]'s alpha = 0.5: beta = (1 - sqrt(1 - alpha))^2 = 0.0858, T = 1",
                             lambda: AlphaBetaParams(alpha=0.5, beta=critically_damped(0.5))),
         },
         error_std=_error_std,

@@ -107,7 +107,7 @@ def _adc_channels(adc, m):
 
 @dataclass(frozen=True, kw_only=True)
 class StateSpaceParams:
-    """A linear state-space model (defaults: the paper's 2-state constant-velocity model).
+    """A linear state-space model (defaults: the 2-state constant-velocity model of [Zhong]).
 
     Parameters
     ----------
@@ -1059,12 +1059,12 @@ def _preset_fixed_gain():
     return StateSpaceParams(F=((1.0, 1.0), (0.0, 1.0)), gain=((alpha,), (beta,)), T=1.0)
 
 
-#: Named models: ``--preset NAME``. ``cv2`` is the paper's filter itself (the ``kalman2`` filter,
+#: Named models: ``--preset NAME``. ``cv2`` is [Zhong]'s filter itself (the ``kalman2`` filter,
 #: which keeps its own datapath: the rate scaled by T, both halves of P); the others are models of
 #: this general filter.
 PRESETS = {
     "ca3": ("constant acceleration, T = 0.5 s ([Zhang], the ship-roll predictor; A's bottom-right entry 1; "
-            "P0 = 10 I, as the paper's all-10s matrix is singular)", _preset_ca3),
+            "P0 = 10 I, as [Zhang]'s all-10s matrix is singular)", _preset_ca3),
     "va2": ("velocity and acceleration, both observed ([Fukuda], fed by the least-squares front end)", _preset_va2),
     "cv2-fixed-gain": ("fixed gain alpha = beta = 0.5 on the constant-velocity model ([Chen]'s values)",
                        _preset_fixed_gain),

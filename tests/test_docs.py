@@ -115,3 +115,30 @@ def test_the_manuals_register_map_is_the_generated_one():
     want = [f"| `0x{r.offset:03X}` | `{r.name}` | {r.access} | {r.description} |"
             for r in register_map(program_for(config, "steady", missing=True), config, "steady")]
     assert rows == want
+
+
+def _sources():
+    """Every Python file of the project, each once (``kfpga/hw``, ``kfpga/model`` and
+    ``kfpga/sim`` are links to the top-level folders)."""
+    links = {ROOT / "kfpga" / layer for layer in ("hw", "model", "sim")}
+    files = [p for p in (ROOT / "kfpga").rglob("*.py") if not links & set(p.parents)]
+    return sorted(files + [p for r in ("hw", "model", "sim", "tests", "bench", "examples")
+                           for p in (ROOT / r).rglob("*.py")])
+
+
+def test_the_code_cites_the_references_by_key():
+    """The source documents are not in the repository: the code cites them by the keys of
+    docs/references.md, never by a path; "the paper" in a file is the one document the file
+    names by key, or [Zhong] where it names none, so a file that says it names at most one."""
+    keys = set(re.findall(r"^\*\*\[(\w+)\]\*\*", (ROOT / "docs" / "references.md").read_text(), re.M))
+    assert keys == {"Zhong", "Zhang", "Lu", "Fukuda", "Chen"}
+    paths, ambiguous = [], []
+    for path in _sources():
+        text = path.read_text()
+        if re.search(r"seeds/\d", text):
+            paths.append(path.relative_to(ROOT))
+        named = set(re.findall(r"\[(" + "|".join(keys) + r")\]", text))
+        if "the paper" in text and len(named) > 1:
+            ambiguous.append(f"{path.relative_to(ROOT)}: {sorted(named)}")
+    assert not paths, f"cite the document by its key in docs/references.md, not its path: {paths}"
+    assert not ambiguous, f"'the paper' with more than one document named: {ambiguous}"

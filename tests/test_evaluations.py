@@ -110,7 +110,7 @@ def test_roll_noise_and_printed_a_change_the_figures(capsys):
         out = json.loads(capsys.readouterr().out)
         figures.append(next(r["rmse_deg"] for r in out["rows"] if r["data"].startswith("synthetic")
                             and r["form"].startswith("improved")))
-    assert figures[1] > figures[0] * 1.5  # the paper's sensor noise: far above 0.2 deg
+    assert figures[1] > figures[0] * 1.5  # [Zhang]'s sensor noise: far above 0.2 deg
     assert figures[2] != figures[0]
 
 

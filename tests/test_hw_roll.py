@@ -11,7 +11,7 @@ from tests.helpers.simulators import core_is_bit_exact_on
 @pytest.mark.cosim
 @pytest.mark.parametrize("simulator", [pytest.param(s, marks=[pytest.mark.long] if s == "icarus" else []) for s in SIMULATORS])
 def test_core_is_the_interval_predictor_in_cocotb(simulator, seed):
-    """The generated Verilog of the roll core on a roll series (the paper's table 1, then a
+    """The generated Verilog of the roll core on a roll series ([Zhang]'s table 1, then a
     synthetic series), with random valid/ready: every output is the model's, which is the
     combined interval predictor's prediction of the sample 2 ahead (``predict_fixed``)."""
     from kfpga.core.config import FilterConfig

@@ -96,7 +96,7 @@ def test_core_decides_at_the_threshold(channels, seed):
     spikes = np.arange(6, 600, 12)
     d = y[spikes] - y[spikes - 1]
     out = FixedModel(CONFIG).run(y).outputs["y"]
-    np.testing.assert_array_equal(out[spikes + th.DELAY] != y[spikes], np.abs(d) > t)  # the paper's test
+    np.testing.assert_array_equal(out[spikes + th.DELAY] != y[spikes], np.abs(d) > t)  # [Lu]'s test
     assert (d < -t).any() and (d > t).any() and (np.abs(d) <= t).any()
     run_core(CONFIG, "online", y, seed=seed, channels=channels, p_idle=0.2, p_ready=0.6)  # every output the model's
 
