@@ -16,7 +16,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["Timing", "TIMING", "CHANNELS", "ADDRESS_CYCLE_MODE", "ADDRESS_FIFO_MODE", "hold_pair", "figure"]
+__all__ = ["Timing", "TIMING", "CHANNELS", "ADDRESS_CYCLE_MODE", "ADDRESS_FIFO_MODE", "CONVERSION_PERIODS", "hold_pair",
+           "figure", "max_rate_hz", "check_rate"]
 
 #: Channel names in address order: A2..A0 = 000..101 select them directly (SBAS219C, Getting data).
 CHANNELS = ("A0", "A1", "B0", "B1", "C0", "C1")
@@ -76,3 +77,27 @@ def figure(symbol, clk_period_ns=200.0):
     """A timing figure in nanoseconds (``clk`` figures scaled by ``clk_period_ns``)."""
     t = TIMING[symbol]
     return t.value * clk_period_ns if t.unit == "clk" else t.value
+
+
+#: ADC clock periods of one free-running conversion and its reads: one channel 23 (20 to convert,
+#: the EOC wait, two read states), all six 38 (six reads of two states); at 5 MHz a sample of one
+#: channel every 230 system cycles (measured on the controller).
+CONVERSION_PERIODS = {1: 23, 6: 38}
+
+
+def max_rate_hz(board, channels, ratio=10, sensors=1):
+    """The fastest the ADS8364 samples each of ``channels`` (1 or 6) at ``board``'s clock and the
+    ADC clock ``ratio``, or each of ``sensors`` taking turns on one channel."""
+    return board.clock_hz / (ratio * CONVERSION_PERIODS[6 if channels > 1 else 1] * sensors)
+
+
+def check_rate(board, channels, ratio=10, sensors=1):
+    """Refuse a ``board.sample_rate_hz`` the ADC cannot reach with ``channels`` (``ValueError``
+    naming the limit)."""
+    limit = max_rate_hz(board, channels, ratio, sensors)
+    if board.sample_rate_hz is not None and board.actual_rate_hz(sensors) > limit * (1 + 1e-9):
+        what = (f"{sensors} sensors taking turns on one channel" if sensors > 1 else
+                "six channels" if channels > 1 else "one channel")
+        raise ValueError(f"board.sample_rate_hz = {board.sample_rate_hz:g} is more than the ADS8364 converts "
+                         f"{what} at a {board.clock_hz / ratio / 1e6:g} MHz ADC clock: at most {limit:.6g} Hz"
+                         + (" each" if sensors > 1 else ""))

@@ -9,6 +9,7 @@ from amaranth.lib.wiring import In, Out
 
 from kfpga.core import registry
 from kfpga.hw.ads8364 import CONV0, ADS8364Controller, SampleLayout
+from kfpga.hw.ads8364_timing import check_rate
 from kfpga.hw.clockdiv import ClockDivider
 from kfpga.hw.cores import make_core
 
@@ -280,9 +281,10 @@ class FilterSystem(wiring.Component):
             prefilter.spec.inputs_for(prefilter.params)[0][0], prefilter.spec.model.default_output)
         # several inputs: all six are converted at one instant and read; the update takes its own
         channels = 6 if six_channel or len(self.adc) > 1 else 1
-        config.board.check(channels, ratio, self.sensors)
+        check_rate(config.board, channels, ratio, self.sensors)
         self.frontend = AdcFrontend(six_channel=six_channel or len(self.adc) > 1, channel=self.channel, ratio=ratio,
-                                    timeout_periods=timeout_periods, conversion_cycles=config.board.conversion_cycles(self.sensors))
+                                    timeout_periods=timeout_periods,
+                                    conversion_cycles=config.board.conversion_cycles(self.sensors))
         options = {} if stages is None else {"stages": stages}
         self.core = make_core(config, self.variant, channels=6 if six_channel else self.sensors,
                                    architecture=architecture, **options)

@@ -17,6 +17,7 @@ from kfpga.cli import main
 from kfpga.core.board import MAX_CHANNELS, Board
 from kfpga.core.config import FilterConfig
 from kfpga.core.fixedmodel import FixedModel
+from kfpga.hw.ads8364_timing import check_rate
 from kfpga.hw.top import port_widths
 from kfpga.sim import system
 from kfpga.sim.ads8364 import Read
@@ -56,9 +57,9 @@ def test_the_timer_converts_each_sensor_at_the_rate():
     assert board.conversion_cycles(1) == 500_000 and board.conversion_cycles(64) == 7812
     assert board.actual_rate_hz(64) == pytest.approx(50e6 / 7812 / 64)
     assert abs(board.actual_rate_hz(64) / 100 - 1) < 1e-4
-    Board(sample_rate_hz=840.0).check(1, 10, 256)  # 215 kSPS on one channel: within
+    check_rate(Board(sample_rate_hz=840.0), 1, 10, 256)  # 215 kSPS on one channel: within
     with pytest.raises(ValueError, match=r"256 sensors taking turns on one channel .* at most \d+(\.\d+)? Hz each"):
-        Board(sample_rate_hz=2000.0).check(1, 10, 256)
+        check_rate(Board(sample_rate_hz=2000.0), 1, 10, 256)
 
 
 def test_the_sensor_source_takes_turns():

@@ -9,6 +9,7 @@ from kfpga.cli.loading import check_samples
 from kfpga.cli.options import not_with
 from kfpga.cli.output import info, pick_seed, progress_bar
 from kfpga.core.errors import UsageError
+from kfpga.hw import ads8364_timing
 from kfpga.hw.cores import make_core
 
 
@@ -32,7 +33,7 @@ def check_rate(args, config):
                          "inputs are for the core alone (kfpga generate --core-only)")
     channels = 6 if args.channels == 6 or len(config.inputs) > 1 else 1
     try:
-        config.board.check(channels, getattr(args, "ratio", 10), sensors(args))
+        ads8364_timing.check_rate(config.board, channels, getattr(args, "ratio", 10), sensors(args))
     except ValueError as exc:
         raise UsageError(str(exc)) from None
 

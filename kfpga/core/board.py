@@ -1,12 +1,13 @@
 """The board the design runs on: its oscillator, defined once for the RTL, benches and constraints,
-and the rate a config asks of it (``[board]``)."""
+and the rate a config asks of it (``[board]``). What the ADS8364 can convert at that rate is the
+hardware's (``hw/ads8364_timing.py``)."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
-__all__ = ["SYSTEM_MHZ", "SYSTEM_PERIOD_NS", "WORST_PATH_GOAL_NS", "Board", "CONVERSION_PERIODS", "MAX_CHANNELS",
+__all__ = ["SYSTEM_MHZ", "SYSTEM_PERIOD_NS", "WORST_PATH_GOAL_NS", "Board", "MAX_CHANNELS",
            "sensor_bits"]
 
 #: The 50 MHz oscillator of the paper's board ([Zhong], section 4.1): the one clock domain.
@@ -18,11 +19,6 @@ SYSTEM_PERIOD_NS = 1000.0 / SYSTEM_MHZ
 #: margin over the board's 50 MHz that ``--architecture auto`` asks of the estimate
 #: (``hw/timing.py``; ``kfpga/flows/explore.py``).
 WORST_PATH_GOAL_NS = round(1000.0 / (1.25 * SYSTEM_MHZ), 2)
-
-#: ADC clock periods of one free-running conversion and its reads: one channel 23 (20 to convert,
-#: the EOC wait, two read states), all six 38 (six reads of two states); at 5 MHz a sample of one
-#: channel every 230 system cycles (measured on the controller).
-CONVERSION_PERIODS = {1: 23, 6: 38}
 
 #: The most sensors an analog multiplexer in front of one ADC channel feeds, one channel state of the
 #: core each (``--channels``); a filter's core may hold more (the alpha-beta tracker's tracks).
@@ -72,18 +68,3 @@ class Board:
         """The rate of each channel (each sensor) the whole number of conversion cycles gives."""
         cycles = self.conversion_cycles(sensors)
         return None if cycles is None else self.clock_hz / (cycles * sensors)
-
-    def max_rate_hz(self, channels, ratio=10, sensors=1):
-        """The fastest the ADS8364 samples each of ``channels`` (1 or 6) at this clock and ADC clock
-        ratio, or each of ``sensors`` taking turns on one channel."""
-        return self.clock_hz / (ratio * CONVERSION_PERIODS[6 if channels > 1 else 1] * sensors)
-
-    def check(self, channels, ratio=10, sensors=1):
-        """Refuse a rate the ADC cannot reach with ``channels`` (``ValueError`` naming the limit)."""
-        limit = self.max_rate_hz(channels, ratio, sensors)
-        if self.sample_rate_hz is not None and self.actual_rate_hz(sensors) > limit * (1 + 1e-9):
-            what = (f"{sensors} sensors taking turns on one channel" if sensors > 1 else
-                    "six channels" if channels > 1 else "one channel")
-            raise ValueError(f"board.sample_rate_hz = {self.sample_rate_hz:g} is more than the ADS8364 converts "
-                             f"{what} at a {self.clock_hz / ratio / 1e6:g} MHz ADC clock: at most {limit:.6g} Hz"
-                             + (" each" if sensors > 1 else ""))

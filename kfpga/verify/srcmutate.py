@@ -11,8 +11,9 @@ source that builds it, the kind of slip a person makes:
 * the condition of an ``m.If`` / ``m.Elif`` inverted.
 
 Only lines of *RTL-building code* are mutated: every function and constant table of ``hw/*.py`` but the tools
-that write files and estimate and the core factory (:data:`NOT_RTL`: ``generate.py``,
-``resources.py``, ``timing.py``, ``ip.py``), never a docstring, a message or an argument check (an ``if`` that only raises).
+that write files and estimate, the core factories and the tools' paths (:data:`NOT_RTL`: ``generate.py``,
+``resources.py``, ``timing.py``, ``ip.py``, ``cores.py``, ``tools.py``), never a docstring, a message or an
+argument check (an ``if`` that only raises).
 Sites are drawn with a seeded generator, ``--mutants`` per file.
 
 Each mutant runs the tests that execute its line (a line no test's context runs, module-level
