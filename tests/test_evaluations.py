@@ -114,7 +114,7 @@ def test_roll_noise_and_printed_a_change_the_figures(capsys):
     assert figures[2] != figures[0]
 
 
-def test_alpha_beta_options_name_the_tracker(capsys):
+def test_alphabeta_options_name_the_tracker(capsys):
     assert main(["evaluate", "alpha-beta", "--seed", "2", "--alpha", "0.27", "--beta", "0.042", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     rows = {r["filter"]: r for r in out["rows"]}
@@ -128,7 +128,7 @@ def test_alpha_beta_options_name_the_tracker(capsys):
 
 
 @pytest.mark.parametrize("command", [["compare"], ["simulate", "--samples", "40", "--quiet"]])
-def test_alpha_beta_random_accel_runs(command, capsys):
+def test_alphabeta_random_accel_runs(command, capsys):
     """Once an AttributeError ('AlphaBetaParams' has no Q): the scenario asks the model for its noise."""
     assert main([*command, "--filter", "alpha-beta", "--scenario", "random-accel", "--seed", "1"]) == 0
     if command[0] == "compare":

@@ -111,7 +111,7 @@ def _tracker(params, z):
     from kfpga.model import alphabeta as ab
 
     out = ab.reference(params, "steady", z)
-    model = FixedModel(FilterConfig(filter="alpha-beta", params=params))
+    model = FixedModel(FilterConfig(filter="alphabeta", params=params))
     result = model.run(z.astype(np.int64), model.initial_state((z.shape[0],)))
     fixed = model.to_float(result)
     return (out["x"], out["v"]), (fixed["x"], fixed["v"])
@@ -163,8 +163,8 @@ def alphabeta(scenario=None, *, seed):
         (x, v), fixed = _tracker(params, z)
         add(name, x, v, note, fixed, glitch=tuple(ab.reference(params, "steady", zg).values()), alpha=a, beta=b)
         # the update's own operations (the start adds a subtraction and selections on two plots)
-        costs[name] = update_cost(FilterConfig(filter="alpha-beta", params=replace(params, init="state")), "steady")
-    general = FilterConfig(filter="alpha-beta", params=ab.AlphaBetaParams(alpha=0.4, beta=0.1, R=r, init="state"))
+        costs[name] = update_cost(FilterConfig(filter="alphabeta", params=replace(params, init="state")), "steady")
+    general = FilterConfig(filter="alphabeta", params=ab.AlphaBetaParams(alpha=0.4, beta=0.1, R=r, init="state"))
     costs["alpha-beta (any other alpha, beta)"] = update_cost(general, "steady")
     mx, mv = _moving_mean(z, s.window)
     lag = (s.window - 1) / 2.0

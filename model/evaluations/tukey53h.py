@@ -163,7 +163,7 @@ def tukey53h(scenario=None, *, seed):
         params = th.Tukey53HParams(threshold=threshold, **extra)
         raw = th.inject_outliers(measured, seed * 16 + i, threshold, density=s.density, sizes=s.sizes, burst=s.burst,
                                  bits=params.input_bits)
-        config = FilterConfig(filter="53h", params=params)
+        config = FilterConfig(filter="tukey53h", params=params)
         model = FixedModel(config)
         n = len(raw)
         online = model.run(raw).y
@@ -198,7 +198,7 @@ def _limits(s, signal, seed):
     from kfpga.model import tukey53h as th
 
     truth, measured, threshold, lsb, _, _ = signal
-    model = FixedModel(FilterConfig(filter="53h", params=th.Tukey53HParams(threshold=threshold)))
+    model = FixedModel(FilterConfig(filter="tukey53h", params=th.Tukey53HParams(threshold=threshold)))
     cases = [(f"runs of {b}", 0.01, (10.0,), (b,)) for b in (1, 2, 3, 4)]
     cases += [(f"size {z:g} x threshold", 0.01, (z,), (1,)) for z in (1.2, 2.0, 5.0)]
     cases += [(f"density {100 * d:g} %", d, (10.0,), (1, 2)) for d in (0.005, 0.02, 0.05, 0.1)]
@@ -222,7 +222,7 @@ def _comparators():
     m5 = dict(ops.counts)
     ops = CostOps({})
     th.median3(ops, *values[:3])
-    return {"median of 5": m5, "median of 3": dict(ops.counts), "whole update": update_cost(FilterConfig(filter="53h"),
+    return {"median of 5": m5, "median of 3": dict(ops.counts), "whole update": update_cost(FilterConfig(filter="tukey53h"),
                                                                                             "online")}
 
 
@@ -274,7 +274,7 @@ def _first_outlier(s, signal, seed):
     _, measured, threshold, _, _, _ = signal
     raw = measured.copy()
     raw[0] = np.clip(raw[0] + (10 if seed % 2 else -10) * threshold, -32768, 32767)
-    model = FixedModel(FilterConfig(filter="53h", params=th.Tukey53HParams(threshold=threshold)))
+    model = FixedModel(FilterConfig(filter="tukey53h", params=th.Tukey53HParams(threshold=threshold)))
     online = model.run(raw).y
     offline = th.offline(raw, run=lambda x: model.run(x).y)
     return {"measured": int(measured[0]), "outlier": int(raw[0]), "online": int(online[th.DELAY]),
