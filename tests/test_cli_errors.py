@@ -7,6 +7,7 @@ the problem, and that no file was created or changed.
 """
 
 import hashlib
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -248,12 +249,17 @@ def test_argparse_errors_end_with_the_one_line_error():
     assert lines[0].startswith("usage: kfpga compare") and lines[-1] == "kfpga compare: error: unrecognized arguments: --bogus"
 
 
-@pytest.mark.slow  # Yosys compiles its WebAssembly again under the fresh HOME (about 35 s)
+@pytest.mark.slow
 def test_the_tool_runs_from_an_unactivated_venv(tmp_path):
-    """No venv on PATH (a user runs .venv/bin/kfpga): Yosys still comes from the interpreter's package."""
+    """No venv on PATH (a user runs .venv/bin/kfpga): Yosys still comes from the interpreter's package.
+    The fresh HOME keeps the machine's YoWASP cache (compiling Yosys' WebAssembly again takes
+    about 40 s and tests nothing of ours)."""
+    import platformdirs
+
     from kfpga.hw.tools import yosys_command
 
-    env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
+    cache = os.environ.get("YOWASP_CACHE_DIR", platformdirs.user_cache_dir("YoWASP", appauthor=False))
+    env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path), "YOWASP_CACHE_DIR": cache}
     result = subprocess.run(yosys_command("-q", "-p", "help"), capture_output=True, text=True, env=env, cwd=tmp_path,
                             timeout=300)
     assert result.returncode == 0, result.stderr

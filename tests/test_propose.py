@@ -19,10 +19,10 @@ def run(capsys, *argv):
     return code, out, err
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def proposal(tmp_path_factory):
     """The paper's filter, both variants, proposed on a short sine over four seeds (the module's tests
-    share it)."""
+    share it: the session keeps it when a worker runs other modules' tests between them)."""
     out = tmp_path_factory.mktemp("propose") / "p.toml"
     code = main(["propose", "--samples", "4000", "--seed", "3", "--seeds", "4", "--out", str(out), "--quiet", "--json"])
     assert code == 0
