@@ -26,7 +26,8 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -n auto --dist loadgroup -m "not models and not long"
 
 # the long tier: the slowest runs (the roll predictor's 12,000-cycle updates on the folded core,
-# Icarus on the paper's roll series, a planted rounding on the folded core, an equivalence proof)
+# Icarus on the paper's roll series, a planted rounding on the folded core, an equivalence proof) and
+# the half of the bus and missing-sample co-simulations' combinations that make test leaves out
 test-long: $(STAMP)
 	$(BIN)/python -m pytest -n auto --dist loadgroup -m "long and not models"
 
