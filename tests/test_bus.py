@@ -2,7 +2,8 @@
 
 The cocotb bench (``sim/test_bus.py``) drives the Avalon-MM slave with cocotbext-avalon and the
 AXI4-Lite one with cocotbext-axi, on the paper's filter and the README's tracker, both variants,
-on Verilator and Icarus: two new Q/R phases written while the stream runs, a fifth of the
+on Verilator and Icarus (half the combinations in ``make test``, the rest in the long tier:
+:func:`_square`): two new Q/R phases written while the stream runs, a fifth of the
 samples missing, every estimate the model's that switches config at the sample the core
 reports (``COMMITTED``). The register values come from ``kfpga regs``'s flow
 (:func:`kfpga.flows.regs.settings_for`), the model's switch from the configs themselves.
