@@ -13,6 +13,7 @@ import pytest
 
 from kfpga.cli import build_parser, main
 from kfpga.core import registry
+from tests.helpers.files import python_files
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
@@ -117,15 +118,6 @@ def test_the_manuals_register_map_is_the_generated_one():
     assert rows == want
 
 
-def _sources():
-    """Every Python file of the project, each once (``kfpga/hw``, ``kfpga/model`` and
-    ``kfpga/sim`` are links to the top-level folders)."""
-    links = {ROOT / "kfpga" / layer for layer in ("hw", "model", "sim")}
-    files = [p for p in (ROOT / "kfpga").rglob("*.py") if not links & set(p.parents)]
-    return sorted(files + [p for r in ("hw", "model", "sim", "tests", "bench", "examples")
-                           for p in (ROOT / r).rglob("*.py")])
-
-
 def test_the_code_cites_the_references_by_key():
     """The source documents are not in the repository: the code cites them by the keys of
     docs/references.md, never by a path; "the paper" in a file is the one document the file
@@ -133,7 +125,7 @@ def test_the_code_cites_the_references_by_key():
     keys = set(re.findall(r"^\*\*\[(\w+)\]\*\*", (ROOT / "docs" / "references.md").read_text(), re.M))
     assert keys == {"Zhong", "Zhang", "Lu", "Fukuda", "Chen"}
     paths, ambiguous = [], []
-    for path in _sources():
+    for path in sorted(python_files("kfpga", "hw", "model", "sim", "tests", "bench", "examples")):
         text = path.read_text()
         if re.search(r"seeds/\d", text):
             paths.append(path.relative_to(ROOT))

@@ -19,11 +19,11 @@ import pytest
 
 from kfpga.cli import main
 from kfpga.core import registry
+from tests.helpers.files import python_files
 
 ROOT = Path(__file__).resolve().parent.parent
 #: The package's files, each once (kfpga/model, hw and sim link to the top-level folders).
-PACKAGE_FILES = [p for folder in ("kfpga", "model", "hw", "sim") for p in (ROOT / folder).rglob("*.py")
-                 if not (folder == "kfpga" and p.relative_to(ROOT / folder).parts[0] in ("model", "hw", "sim"))]
+PACKAGE_FILES = python_files("kfpga", "model", "hw", "sim")
 
 
 #: A word of a string: letters, digits and underscores, hyphens inside (``alpha-beta``, ``53h``).
